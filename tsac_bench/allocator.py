@@ -1,0 +1,158 @@
+"""The ``Allocator`` protocol every method implements, the planning state it sees, and the
+registry that finds methods by name (built-ins and ``tsac_bench.allocators`` plug-ins).
+
+A method is a class whose constructor takes its settings as keywords (so that a run can be
+rebuilt from its record) and whose ``plan`` turns a ``PlanningState`` into one route per AAV.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+from tsac_bench.errors import TsacBenchError, UnknownMethodError
+from tsac_bench.model import Instance, Route, Visit
+
+ENTRY_POINT_GROUP = "tsac_bench.allocators"
+
+
+@dataclass(frozen=True)
+class PlanningState:
+    """What an allocator may use at one planning moment.
+
+    ``visible`` tasks are the released ones the allocator may visit; every AAV's new route
+    must start with its ``committed`` prefix (MODEL.md, the dynamic run). ``incumbent`` is the
+    plan in force before this moment, a warm start for methods that want one.
+    """
+
+    instance: Instance
+    time: float = 0.0
+    visible: frozenset[int] = frozenset()
+    committed: tuple[Route, ...] = ()
+    incumbent: tuple[Route, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if not self.committed:
+            object.__setattr__(self, "committed", tuple(() for _ in self.instance.aavs))
+
+    @classmethod
+    def static(cls, instance: Instance) -> PlanningState:
+        """Every task known at t = 0, nothing committed."""
+        return cls(instance, 0.0, frozenset(range(instance.n_tasks)))
+
+    def first_free(self, n: int) -> int:
+        """Index of AAV n's first visit that the plan may change."""
+        return len(self.committed[n])
+
+    def base_routes(self) -> tuple[Route, ...]:
+        """The committed prefixes made into feasible routes: a prefix that stops at a task
+        (the AAV is flying to it) is closed with the depot nearest to that task."""
+        closed = []
+        for prefix in self.committed:
+            if prefix and not self.instance.is_depot(prefix[-1].node):
+                prefix = (*prefix, Visit(self.instance.nearest_depot(prefix[-1].node)))
+            closed.append(prefix)
+        return tuple(closed)
+
+    def violations(self, routes: Sequence[Route]) -> list[str]:
+        """What in ``routes`` this state forbids (changed prefix, invisible task)."""
+        problems = []
+        if len(routes) != self.instance.n_aavs:
+            return [f"{len(routes)} routes for {self.instance.n_aavs} AAVs"]
+        n_tasks = self.instance.n_tasks
+        for n, (route, prefix) in enumerate(zip(routes, self.committed, strict=True)):
+            aav = self.instance.aavs[n].id
+            if tuple(route[: len(prefix)]) != prefix:
+                problems.append(f"{aav}: the committed prefix was changed")
+            for v in route[len(prefix):]:
+                if v.node < n_tasks and v.node not in self.visible:
+                    problems.append(f"{aav}: visits task {self.instance.tasks[v.node].id} "
+                                    f"which is not visible at t={self.time:g}")
+        return problems
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """An allocator's answer: routes plus what it wants recorded (status, bounds, counters)."""
+
+    routes: tuple[Route, ...]
+    stats: Mapping[str, Any] = field(default_factory=dict)
+
+
+@runtime_checkable
+class Allocator(Protocol):
+    name: ClassVar[str]
+
+    def plan(self, state: PlanningState, *, seed: int = 0,
+             time_limit: float | None = None) -> PlanResult: ...
+
+
+class Settings:
+    """Mixin: ``settings()`` returns the constructor keywords, as scikit-learn's get_params."""
+
+    def settings(self) -> dict[str, Any]:
+        names = [p for p in inspect.signature(type(self).__init__).parameters if p != "self"]
+        return {name: getattr(self, name) for name in names}
+
+
+# --- registry ----------------------------------------------------------------------------
+#: Built-in methods by name, as "module:Class" so that listing them imports nothing heavy.
+BUILTIN_METHODS: dict[str, str] = {
+    "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
+}
+
+_registered: dict[str, Callable[..., Allocator]] = {}
+
+
+def register(name: str) -> Callable[[type], type]:
+    """Class decorator registering a method in this process (tests and notebooks)."""
+
+    def decorate(cls: type) -> type:
+        _registered[name] = cls
+        return cls
+
+    return decorate
+
+
+def _plugin_methods() -> dict[str, Any]:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available_methods() -> list[str]:
+    return sorted({*BUILTIN_METHODS, *_registered, *_plugin_methods()})
+
+
+def method_source(name: str) -> str:
+    if name in _registered:
+        return "registered"
+    if name in BUILTIN_METHODS:
+        return "built-in"
+    return "plug-in"
+
+
+class MethodUnavailable(TsacBenchError):
+    """A known method whose optional dependencies are not installed."""
+
+
+def allocator_class(name: str) -> Callable[..., Allocator]:
+    if name in _registered:
+        return _registered[name]
+    plugins = _plugin_methods()
+    if name in BUILTIN_METHODS:
+        module_name, _, attr = BUILTIN_METHODS[name].partition(":")
+        try:
+            return getattr(importlib.import_module(module_name), attr)
+        except ImportError as exc:
+            raise MethodUnavailable(f"method {name!r} needs {exc.name!r}: "
+                                    f"pip install -e '.[all]'") from None
+    if name in plugins:
+        return plugins[name].load()
+    raise UnknownMethodError(name, available_methods())
+
+
+def make_allocator(name: str, **settings: Any) -> Allocator:
+    return allocator_class(name)(**settings)

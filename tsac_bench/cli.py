@@ -24,7 +24,11 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 console = Console()
-err_console = Console(stderr=True)
+
+
+def say_error(line: str) -> None:
+    """One unwrapped line on stderr, whatever the terminal width."""
+    typer.echo(line, err=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -37,7 +41,7 @@ def user_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except TsacBenchError as exc:
-            err_console.print(f"error: {exc}", markup=False, highlight=False)
+            say_error(f"error: {exc}")
             raise typer.Exit(exc.exit_code) from None
 
     return wrapper  # type: ignore[return-value]
@@ -111,12 +115,12 @@ def evaluate(
         _print_breakdown(result)
     else:
         for error in result.errors:
-            err_console.print(f"{solution_path}: {error}", markup=False, highlight=False)
+            say_error(f"{solution_path}: {error}")
     if not result.feasible:
         raise typer.Exit(1)
     if solution.cost is not None and result.J is not None and not _close(solution.cost, result.J):
-        err_console.print(f"warning: the file claims cost {solution.cost}, the evaluator "
-                          f"computes {result.J}", markup=False)
+        say_error(f"warning: {solution_path}: cost: the file claims {solution.cost}, the "
+                  f"evaluator computes {result.J}")
 
 
 def _close(a: float, b: float) -> bool:

@@ -1,0 +1,30 @@
+from pathlib import Path
+
+import pytest
+
+from tsac_bench.io import read_instance
+from tsac_bench.model import Instance, Solution
+
+DATA = Path(__file__).parent / "data"
+ROOT = Path(__file__).parent.parent
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    return DATA
+
+
+@pytest.fixture(scope="session")
+def hand() -> Instance:
+    """Two AAVs, two depots, four tasks with round distances (tests/data/hand.json)."""
+    return read_instance(DATA / "hand.json")
+
+
+@pytest.fixture(scope="session")
+def paper_x20() -> Instance:
+    return read_instance(ROOT / "instances" / "paper" / "paper-small-x20.json")
+
+
+def plan(instance: Instance, **routes: list) -> Solution:
+    """``plan(hand, A0=[("T0", 5), "D0"])``: a solution from ids, other AAVs idle."""
+    return Solution.from_ids(instance, routes)

@@ -1,0 +1,80 @@
+import json
+import subprocess
+import sys
+
+import pytest
+from typer.testing import CliRunner
+
+from tsac_bench.cli import app
+
+runner = CliRunner()
+
+
+def invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def test_evaluate_prints_J_and_json(data_dir):
+    result = invoke("evaluate", data_dir / "hand.json", data_dir / "hand-solution.json")
+    assert result.exit_code == 0, result.output
+    assert "J = 212.821528" in result.output
+    result = invoke("evaluate", data_dir / "hand.json", data_dir / "hand-solution.json", "--json")
+    data = json.loads(result.stdout)
+    assert data["feasible"] is True and data["errors"] == []
+    assert data["J"] == pytest.approx(212.82152777777778, rel=1e-15)
+    assert [t["task"] for t in data["per_task"]] == ["T0", "T1", "T2", "T3"]
+    assert data["per_task"][1]["amounts"] == {"A1": 10}
+
+
+def test_evaluate_infeasible_exits_1_with_named_errors(tmp_path, data_dir):
+    solution = json.loads((data_dir / "hand-solution.json").read_text())
+    solution["routes"]["A1"] = [{"node": "T3", "amount": 10}, {"node": "D0"}]
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(solution))
+    result = invoke("evaluate", data_dir / "hand.json", path)
+    assert result.exit_code == 1
+    assert "routes.A1[0]" in result.output and "no-goods" in result.output
+    as_json = invoke("evaluate", data_dir / "hand.json", path, "--json")
+    assert as_json.exit_code == 1
+    assert json.loads(as_json.stdout)["errors"][0]["code"] == "no-goods"
+
+
+@pytest.mark.parametrize("bad", ["malformed", "duplicate-id", "unknown-format"])
+def test_bad_input_is_one_line_and_exit_2(data_dir, bad):
+    # A real process: exit code and stderr as a user sees them, no traceback.
+    done = subprocess.run([sys.executable, "-m", "tsac_bench", "info",
+                           str(data_dir / "bad" / f"{bad}.json")], capture_output=True, text=True)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {data_dir / 'bad' / bad}.json: ")
+    assert "Traceback" not in done.stderr
+
+
+def test_unknown_method_exit_2(data_dir):
+    result = invoke("solve", data_dir / "hand.json", "--method", "nope")
+    assert result.exit_code == 2
+    assert "unknown method 'nope'" in result.output
+
+
+def test_solve_writes_a_solution_that_evaluates_to_the_printed_J(tmp_path, data_dir):
+    out = tmp_path / "greedy.json"
+    result = invoke("solve", data_dir / "hand.json", "--method", "greedy", "--out", out)
+    assert result.exit_code == 0, result.output
+    claimed = json.loads(out.read_text())["cost"]
+    assert f"J = {claimed:.6f}" in result.output
+    check = invoke("evaluate", data_dir / "hand.json", out, "--json")
+    assert json.loads(check.stdout)["J"] == claimed
+
+
+def test_generate_and_info(tmp_path):
+    result = invoke("generate", "--scale", "4/10", "--count", "2", "--seed", "5", "--out", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gen-4-10-s5.json", "gen-4-10-s6.json"]
+    info = invoke("info", tmp_path / "gen-4-10-s5.json")
+    assert info.exit_code == 0 and "scale 4/10" in info.output
+    assert invoke("generate", "--scale", "x").exit_code == 2
+
+
+def test_methods_lists_greedy():
+    result = invoke("methods")
+    assert result.exit_code == 0 and "greedy" in result.output

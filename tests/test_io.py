@@ -1,0 +1,106 @@
+import json
+
+import pytest
+
+from tsac_bench.errors import InputError
+from tsac_bench.generator import generate
+from tsac_bench.io import (
+    instance_from_dict,
+    instance_to_dict,
+    read_instance,
+    read_solution,
+    solution_to_dict,
+    write_instance,
+    write_solution,
+)
+from tsac_bench.model import Solution
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [
+        ("duplicate-id", "tasks[1].id: duplicate id 'T0' (already used in tasks)"),
+        ("negative-demand", "tasks[2].demand: must be an integer >= 1 kg, got -5"),
+        ("window-reversed", "tasks[1].t_end: window ends before it starts (100 < t_start 300)"),
+        ("release-after-start", "tasks[1].release: must lie in [0, t_start=300], got 400"),
+        ("wrong-type", "aavs[0].capacity: Input should be a valid integer, got '30'"),
+        ("float-demand", "tasks[0].demand: Input should be a valid integer, got 10.0"),
+        ("unknown-format", "format: expected 'tsac-bench/instance@1', got "
+                           "'tsac-bench/instance@9'"),
+        ("missing-field", "tasks[3].t_end: Field required"),
+        ("bad-kind", "tasks[3].kind: Input should be 'P' or 'D', got 'X'"),
+        ("zero-speed", "aavs[1].speed: must be positive, got 0"),
+        ("malformed", "not valid JSON"),
+    ],
+)
+def test_bad_instance_files_name_the_file_and_field(data_dir, name, message):
+    path = data_dir / "bad" / f"{name}.json"
+    with pytest.raises(InputError) as caught:
+        read_instance(path)
+    text = str(caught.value)
+    assert text.startswith(f"{path}: ") and message in text
+    assert "\n" not in text
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        read_instance(tmp_path / "nope.json")
+
+
+def test_instance_round_trip(tmp_path, hand):
+    generated = generate("8/20", seed=3)
+    for instance in (hand, generated):
+        write_instance(instance, tmp_path / "i.json")
+        again = read_instance(tmp_path / "i.json")
+        assert again == instance
+        assert instance_to_dict(again) == instance_to_dict(instance)
+
+
+def test_unknown_keys_are_ignored(hand):
+    data = instance_to_dict(hand) | {"comment": "extra"}
+    data["tasks"][0]["colour"] = "red"
+    assert instance_from_dict(data) == hand
+
+
+def test_solution_round_trip(tmp_path, hand):
+    solution = Solution.from_ids(hand, {"A1": ["D0", ("T1", 10), "D0"]}, cost=50.0,
+                                 meta={"method": "hand"})
+    write_solution(solution, hand, tmp_path / "s.json")
+    assert read_solution(tmp_path / "s.json", hand) == solution
+    written = json.loads((tmp_path / "s.json").read_text())
+    assert written["routes"] == {"A0": [], "A1": [{"node": "D0"}, {"node": "T1", "amount": 10},
+                                                  {"node": "D0"}]}
+
+
+def _solution_file(tmp_path, hand, mutate):
+    data = solution_to_dict(Solution.from_ids(hand, {"A0": [("T0", 5), "D0"]}), hand)
+    mutate(data)
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("mutate", "message"),
+    [
+        (lambda d: d["routes"]["A0"][0].update(node="T9"),
+         "routes.A0[0].node: unknown node id 'T9'"),
+        (lambda d: d["routes"].update(A7=[]), "routes.A7: unknown AAV id"),
+        (lambda d: d["routes"].pop("A1"), "routes.A1: missing"),
+        (lambda d: d.update(format="tsac-bench/solution@2"), "format: expected"),
+        (lambda d: d.update(instance="other"), "instance: solution is for instance 'other'"),
+        (lambda d: d["routes"]["A0"][0].pop("node"), "routes.A0[0].node: Field required"),
+        (lambda d: d.update(routes=[]), "routes: Input should be a valid dictionary"),
+    ],
+)
+def test_bad_solution_files(tmp_path, hand, mutate, message):
+    path = _solution_file(tmp_path, hand, mutate)
+    with pytest.raises(InputError, match=None) as caught:
+        read_solution(path, hand)
+    assert str(caught.value).startswith(f"{path}: ") and message in str(caught.value)
+
+
+def test_amount_types_reach_the_evaluator_unchanged(tmp_path, hand):
+    # 2.0 and true are not kilograms: the parser keeps them so the evaluator can say so.
+    path = _solution_file(tmp_path, hand, lambda d: d["routes"]["A0"][0].update(amount=2.0))
+    assert read_solution(path, hand).routes[0][0].amount == 2.0

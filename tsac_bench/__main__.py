@@ -1,0 +1,3 @@
+from tsac_bench.cli import main
+
+main()

@@ -28,3 +28,15 @@ def paper_x20() -> Instance:
 def plan(instance: Instance, **routes: list) -> Solution:
     """``plan(hand, A0=[("T0", 5), "D0"])``: a solution from ids, other AAVs idle."""
     return Solution.from_ids(instance, routes)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Long checks (full training, large sweeps) run only with TSAC_BENCH_SLOW=1."""
+    import os
+
+    if os.environ.get("TSAC_BENCH_SLOW") == "1":
+        return
+    skip = pytest.mark.skip(reason="slow: set TSAC_BENCH_SLOW=1 to run")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)

@@ -58,6 +58,28 @@ class PlanningState:
             closed.append(prefix)
         return tuple(closed)
 
+    def warm_routes(self) -> tuple[Route, ...]:
+        """The ``incumbent`` plan kept where this state allows it, a warm start: each AAV's
+        incumbent route without its free visits to tasks no longer visible (depot visits made
+        pointless dropped too); ``base_routes()`` for an AAV whose incumbent does not start
+        with its committed prefix, and for every AAV when there is no incumbent."""
+        from tsac_bench.insertion import removal_route
+
+        if self.incumbent is None:
+            return self.base_routes()
+        instance, n_tasks = self.instance, self.instance.n_tasks
+        warm = []
+        for n, (route, base) in enumerate(zip(self.incumbent, self.base_routes(), strict=True)):
+            first_free = self.first_free(n)
+            if tuple(route[:first_free]) != self.committed[n]:
+                warm.append(base)
+                continue
+            for v in route[first_free:]:
+                if v.node < n_tasks and v.node not in self.visible:
+                    route = removal_route(instance, route, v.node, first_free)
+            warm.append(route if len(route) > first_free else base)
+        return tuple(warm)
+
     def violations(self, routes: Sequence[Route]) -> list[str]:
         """What in ``routes`` this state forbids (changed prefix, invisible task)."""
         problems = []
@@ -77,10 +99,15 @@ class PlanningState:
 
 @dataclass(frozen=True)
 class PlanResult:
-    """An allocator's answer: routes plus what it wants recorded (status, bounds, counters)."""
+    """An allocator's answer: routes plus what it wants recorded (status, bounds, counters).
+
+    ``cost`` is J as the method itself computes it, if it does (a solver's objective, an
+    incremental total); ``solve`` records it next to the evaluator's J and the conformance
+    suite requires the two to agree."""
 
     routes: tuple[Route, ...]
     stats: Mapping[str, Any] = field(default_factory=dict)
+    cost: float | None = None
 
 
 @runtime_checkable
@@ -103,6 +130,8 @@ class Settings:
 #: Built-in methods by name, as "module:Class" so that listing them imports nothing heavy.
 BUILTIN_METHODS: dict[str, str] = {
     "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
+    "hocf": "tsac_bench.solvers.hocf:HOCFAllocator",
+    "rocf": "tsac_bench.solvers.rocf:ROCFAllocator",
 }
 
 _registered: dict[str, Callable[..., Allocator]] = {}

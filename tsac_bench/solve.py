@@ -1,38 +1,49 @@
-"""One method on one instance: plan, check the plan against the planning state, and score
-it with the evaluator. The runner and the CLI both go through ``solve``."""
+"""One method on one instance: plan (once, or through the release events of a dynamic run),
+check every plan against its planning state, and score the result with the evaluator. The
+runner and the CLI both go through ``solve``."""
 
 from __future__ import annotations
 
-import time
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from tsac_bench.allocator import Allocator, PlanningState, make_allocator
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.evaluator import CostEvaluator, Evaluation
+from tsac_bench.evaluator import Evaluation
 from tsac_bench.model import Instance, Solution
+from tsac_bench.simulator import InvalidPlan, checked_plan, simulate
 
-MODES = ("static",)
+__all__ = ["MODES", "InvalidPlan", "SolveOutcome", "solve"]
 
-
-class InvalidPlan(TsacBenchError):
-    """An allocator returned routes its planning state forbids, or infeasible routes."""
-
-    exit_code = 1
+#: "static": every task known at t = 0, one plan call. "dynamic": the simulator's run.
+MODES = ("static", "dynamic")
 
 
 @dataclass(frozen=True)
 class SolveOutcome:
+    """``stats``: the allocator's own stats (static), or ``{"replans": [...]}`` with one
+    record per planning moment (dynamic, see ``simulator.Replan``). ``claimed_cost`` is the
+    J the method computed itself (``PlanResult.cost``), of the last plan, if any."""
+
     solution: Solution
     evaluation: Evaluation
     wall_time: float
     stats: Mapping[str, Any] = field(default_factory=dict)
+    claimed_cost: float | None = None
 
     @property
     def cost(self) -> float:
         assert self.evaluation.J is not None
         return self.evaluation.J
+
+    @property
+    def claim_matches(self) -> bool:
+        """The method's own J agrees with the evaluator's (True when it claims none)."""
+        if self.claimed_cost is None:
+            return True
+        return math.isclose(self.claimed_cost, self.cost, rel_tol=1e-6, abs_tol=1e-6)
 
 
 def solve(instance: Instance, method: str | Allocator, *, seed: int = 0,
@@ -40,26 +51,26 @@ def solve(instance: Instance, method: str | Allocator, *, seed: int = 0,
           settings: Mapping[str, Any] | None = None) -> SolveOutcome:
     """Run ``method`` and return its solution scored by the evaluator.
 
-    Raises InvalidPlan when the method breaks the rules, so that no infeasible plan is ever
-    reported with a cost."""
+    ``time_limit`` is the budget of each plan call. Raises InvalidPlan when the method
+    breaks the rules, so that no infeasible plan is ever reported with a cost."""
     if mode not in MODES:
         raise TsacBenchError(f"unknown mode {mode!r}; known modes: {', '.join(MODES)}")
     allocator = make_allocator(method, **(settings or {})) if isinstance(method, str) else method
-    state = PlanningState.static(instance)
-    began = time.perf_counter()
-    result = allocator.plan(state, seed=seed, time_limit=time_limit)
-    wall = time.perf_counter() - began
-    problems = state.violations(result.routes)
-    if problems:
-        raise InvalidPlan(f"{allocator.name} on {instance.name}: " + "; ".join(problems))
-    evaluation = CostEvaluator(instance).evaluate(result.routes)
-    if not evaluation.feasible:
-        raise InvalidPlan(f"{allocator.name} on {instance.name}: infeasible plan: "
-                          + "; ".join(str(e) for e in evaluation.errors))
+    if mode == "static":
+        plan = checked_plan(allocator, PlanningState.static(instance), seed=seed,
+                            time_limit=time_limit)
+        routes, evaluation, wall = plan.result.routes, plan.evaluation, plan.wall_time
+        stats, claimed = dict(plan.result.stats), plan.result.cost
+    else:
+        run = simulate(instance, allocator, seed=seed, time_limit=time_limit)
+        routes, evaluation, wall = run.routes, run.evaluation, run.wall_time
+        stats = {"replans": [r.to_dict() for r in run.replans]}
+        # Only the last plan is the executed one; earlier claims priced other plans.
+        claimed = run.replans[-1].claimed_cost
     meta = {"method": allocator.name, "mode": mode, "seed": seed,
             "settings": _jsonable(allocator.settings()) if hasattr(allocator, "settings") else {}}
-    solution = Solution(instance.name, result.routes, evaluation.J, meta)
-    return SolveOutcome(solution, evaluation, wall, dict(result.stats))
+    solution = Solution(instance.name, routes, evaluation.J, meta)
+    return SolveOutcome(solution, evaluation, wall, stats, claimed)
 
 
 def _jsonable(settings: Mapping[str, Any]) -> dict[str, Any]:

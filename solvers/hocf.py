@@ -1,0 +1,82 @@
+"""``hocf``: the heuristic OCF game of Li et al. [14] as the paper describes it (Sec. I and
+III-A-2): task-validity matching, ineffective-resource exit and a tabu list.
+
+* Task-validity matching: the AAV only considers tasks its resources match: the engine's
+  validity mask (residual demand left for it, reachable before the deadline and within
+  range) - and among those, the task with the highest priority score (below).
+* Ineffective-resource exit: before anything else, the AAV leaves a coalition in which its
+  resource does nothing: its visit is late, or the other members already cover the demand on
+  time without it.
+* Tabu list: the engine's (every structure passed through is tabu).
+
+Priority of joining task m for AAV n (each term in [0, 1], weights are settings):
+  w_urgency  * (1 - slack / T_hor)        slack = t_end - earliest arrival from n's anchor
++ w_distance * (1 - d / d_max)            d = distance from the nearest node of n's free
+                                          route (or its anchor) to m; d_max = the instance's
+                                          largest distance
++ w_residual * min(R^_m, B_n) / R_m       the share of m's demand n can still cover (Eq. 19)
+The last term is the part of C_load (weight w1) that n alone could remove. Ties go to the
+lower task index. When no join is left to try, the AAV tries to leave its own coalition
+with the lowest priority first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
+
+from tsac_bench.allocator import PlanningState
+from tsac_bench.model import Instance
+
+
+class HeuristicSelection:
+    def __init__(self, instance: Instance, w_urgency: float, w_distance: float,
+                 w_residual: float) -> None:
+        self.w_urgency, self.w_distance, self.w_residual = w_urgency, w_distance, w_residual
+        self.d_max = float(instance.dist.max()) or 1.0
+
+    def priority(self, view: DecisionView, m: int) -> float:
+        game, n = view.game, view.aav
+        instance = game.instance
+        task = instance.tasks[m]
+        slack = task.t_end - view.earliest_arrival(m)
+        urgency = 1.0 - min(1.0, max(0.0, slack / instance.horizon))
+        dist = instance.dist_rows
+        nodes = [view.anchor.node, *(v.node for v in game.route(n)[game.first_free[n]:])]
+        proximity = 1.0 - min(dist[k][m] for k in nodes) / self.d_max
+        share = min(view.residual(m), instance.aavs[n].capacity) / task.demand
+        return (self.w_urgency * urgency + self.w_distance * proximity
+                + self.w_residual * share)
+
+    def ineffective(self, view: DecisionView, m: int) -> bool:
+        game, n = view.game, view.aav
+        own = game.plan.members[m][n]
+        late = own.arrival > game.instance.tasks[m].t_end
+        return late or view.residual(m) == 0
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
+        del rng  # deterministic given the structure; the engine's permutation is random
+        own = [m for m in view.candidates if view.is_member(m)]
+        for m in own:
+            if self.ineffective(view, m):
+                return m
+        joins = [m for m in view.candidates if not view.is_member(m)]
+        if joins:
+            return max(joins, key=lambda m: (self.priority(view, m), -m))
+        return min(own, key=lambda m: (self.priority(view, m), m))
+
+
+class HOCFAllocator(OCFAllocator):
+    name = "hocf"
+
+    def __init__(self, w_urgency: float = 1.0, w_distance: float = 2.0,
+                 w_residual: float = 1.0, k_max: int = 200_000, c_max: int = 5_000,
+                 init: str = "incumbent") -> None:
+        super().__init__(k_max=k_max, c_max=c_max, init=init)
+        self.w_urgency = w_urgency
+        self.w_distance = w_distance
+        self.w_residual = w_residual
+
+    def rule(self, state: PlanningState) -> SelectionRule:
+        return HeuristicSelection(state.instance, self.w_urgency, self.w_distance,
+                                  self.w_residual)

@@ -1,0 +1,403 @@
+"""The overlapping coalition formation (OCF) game of the paper's Sec. III-C (Algorithm 1).
+
+Players are the AAVs; a coalition is the set of AAVs that serve a task, each with its own
+amount, and an AAV belongs to as many coalitions as its route has task visits (overlap). The
+coalition structure lives on top of the evaluator's ``PlanState`` (routes plus per-task
+contributions), so every price is the exact change of J.
+
+One *decision* (an iteration k of Algorithm 1):
+
+1. AAV n, whose turn it is, sees the structure as the AAVs before it left it; the residual
+   demand of task m it sees is Eq. 19: R_m minus what the *other* AAVs bring on time.
+2. Its *candidates* are its valid tasks (``valid_tasks``): visible tasks it could join
+   (residual >= 1, reachable by the deadline and within range from where its free route
+   begins: the validity mask) and its own removable tasks (visits at or after its first free
+   position), less the tasks already rejected for it under the present structure.
+3. The selection rule (``SelectionRule``: where ROCF, HOCF and TSAC-OCF differ) picks m*.
+4. m* not in its route: ADD, join m*'s coalition at the best position, with or without a depot
+   visit before it, with as much of the residual as fits (``insertion.best_insertion``).
+   m* in its route: REMOVE, leave the coalition (``insertion.removal_route``).
+5. The move is accepted iff J strictly decreases (Eq. 22) and the resulting structure is not
+   in the tabu list; every structure the game passes through enters the tabu list.
+
+Decisions run in rounds; each round activates the AAVs in a fresh random permutation
+(Eq. 18). The game stops after ``k_max`` decisions, ``c_max`` consecutive rejections, at the
+time limit, or when a whole round finds no AAV with a candidate: then no AAV has a single
+ADD or REMOVE that lowers J and is not tabu, i.e. the structure is Nash-stable.
+
+Why the rejected-candidate memory is exact: a move's outcome depends only on the deciding
+AAV's route and on the coalitions of the tasks its route touches (and on the tabu list, which
+only grows). After an accepted move by AAV n, the memory is cleared for n and for every AAV
+in a coalition whose contributions changed, and those tasks are forgotten for everyone else;
+every other rejected (AAV, task) pair would be rejected again, so it is not re-evaluated.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple, Protocol
+
+import numpy as np
+
+from tsac_bench.allocator import PlanningState, PlanResult, Settings
+from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator, PlanState, Proposal
+from tsac_bench.insertion import best_insertion, removal_route
+from tsac_bench.model import Route
+
+#: A move must lower J by more than this to count as a strict decrease (Eq. 22): J is a sum
+#: of floats, and a "gain" below this is rounding, which could otherwise cycle.
+STRICT_DECREASE = 1e-9
+
+ADD, REMOVE = "add", "remove"
+
+
+class Anchor(NamedTuple):
+    """Where AAV n's free route begins: the node it last committed to (its start position
+    when nothing is committed), the time it leaves it and the distance flown to get there."""
+
+    node: int
+    time: float
+    flown: float
+
+
+class Move(NamedTuple):
+    op: str  # ADD or REMOVE
+    aav: int
+    task: int
+    proposal: Proposal
+
+
+class Decision(NamedTuple):
+    """One iteration of Algorithm 1 as recorded: ``J`` after it (unchanged when rejected)."""
+
+    k: int
+    aav: int
+    task: int
+    op: str
+    accepted: bool
+    J: float
+
+
+def structure_key(n: int, route: Route, n_tasks: int) -> int:
+    """AAV n's part of the coalition-structure key: its (task, amount) memberships. The
+    whole structure's key is the XOR over AAVs, so one AAV's change updates it in O(route)."""
+    key = 0
+    for node, amount in route:
+        if node < n_tasks:
+            key ^= hash((n, node, amount))
+    return key
+
+
+class CoalitionGame:
+    """The coalition structure of one planning moment and the ADD/REMOVE moves on it."""
+
+    def __init__(self, state: PlanningState, routes: Sequence[Route] | None = None) -> None:
+        self.state = state
+        self.instance = instance = state.instance
+        self.evaluator = CostEvaluator(instance)
+        self.plan: PlanState = self.evaluator.state(
+            routes if routes is not None else state.base_routes())
+        self.n_aavs, self.n_tasks = instance.n_aavs, instance.n_tasks
+        self.first_free = [state.first_free(n) for n in range(self.n_aavs)]
+        self.visible = sorted(state.visible)
+        self._dist = instance.dist_rows
+        self._t_end = [t.t_end + TIME_TOLERANCE for t in instance.tasks]
+        self._demand = [t.demand for t in instance.tasks]
+        self._speed = [a.speed for a in instance.aavs]
+        self._range = [a.max_range for a in instance.aavs]
+        self._aav_keys = [structure_key(n, t.route, self.n_tasks)
+                          for n, t in enumerate(self.plan.traces)]
+        self.key = 0
+        for k in self._aav_keys:
+            self.key ^= k
+        self.tabu: set[int] = {self.key}
+        self.rejected: list[set[int]] = [set() for _ in range(self.n_aavs)]
+        self.trajectory: list[float] = [self.plan.cost]
+        self.decisions: list[Decision] = []
+        self.tabu_hits = 0
+
+    # --- what AAV n sees ---------------------------------------------------------------
+    @property
+    def cost(self) -> float:
+        return self.plan.cost
+
+    def route(self, n: int) -> Route:
+        return self.plan.traces[n].route
+
+    def anchor(self, n: int) -> Anchor:
+        ff = self.first_free[n]
+        if ff == 0:
+            return Anchor(self.instance.start_node(n), 0.0, 0.0)
+        trace = self.plan.traces[n]
+        return Anchor(trace.route[ff - 1].node, trace.arrivals[ff - 1],
+                      trace.distance_at_arrival[ff - 1])
+
+    def residual(self, n: int, m: int) -> int:
+        """Eq. 19: task m's demand less what the AAVs other than n bring on time."""
+        return max(0, self._demand[m] - self.plan.covered(m, exclude=n))
+
+    def earliest_arrival(self, n: int, m: int, anchor: Anchor | None = None) -> float:
+        """A lower bound on AAV n's arrival at m wherever it is inserted (triangle
+        inequality: every later position is reached via the anchor)."""
+        a = anchor or self.anchor(n)
+        return a.time + self._dist[a.node][m] / self._speed[n]
+
+    def removable(self, n: int) -> list[int]:
+        """AAV n's task visits at or after its first free position."""
+        return [v.node for v in self.route(n)[self.first_free[n]:] if v.node < self.n_tasks]
+
+    def valid_tasks(self, n: int) -> list[int]:
+        """The validity mask: tasks AAV n could join (residual left, reachable on time and
+        within range from its anchor) plus its own removable tasks, ascending."""
+        anchor = self.anchor(n)
+        own = {v.node for v in self.route(n)}
+        removable = set(self.removable(n))
+        row = self._dist[anchor.node]
+        speed, reach = self._speed[n], self._range[n] - anchor.flown
+        valid = []
+        for m in self.visible:
+            if m in own:
+                if m in removable:
+                    valid.append(m)
+            elif (row[m] <= reach and anchor.time + row[m] / speed <= self._t_end[m]
+                  and self.residual(n, m) >= 1):
+                valid.append(m)
+        return valid
+
+    def candidates(self, n: int) -> tuple[int, ...]:
+        rejected = self.rejected[n]
+        return tuple(m for m in self.valid_tasks(n) if m not in rejected)
+
+    # --- moves -------------------------------------------------------------------------
+    def move(self, n: int, m: int) -> Move | None:
+        """AAV n's move on task m: REMOVE if m is in its route, ADD otherwise; None when no
+        feasible ADD exists (no capacity left where it could go, nothing left to cover)."""
+        route = self.route(n)
+        ff = self.first_free[n]
+        if any(v.node == m for v in route):
+            proposal = self.plan.propose(n, removal_route(self.instance, route, m, ff))
+            return None if proposal is None else Move(REMOVE, n, m, proposal)
+        proposal = best_insertion(self.plan, n, m, ff, self.residual(n, m))
+        return None if proposal is None else Move(ADD, n, m, proposal)
+
+    def key_after(self, move: Move) -> int:
+        n = move.aav
+        return self.key ^ self._aav_keys[n] ^ structure_key(n, move.proposal.trace.route,
+                                                            self.n_tasks)
+
+    def acceptable(self, move: Move | None) -> bool:
+        """Eq. 22 and the tabu list."""
+        if move is None or not move.proposal.delta < -STRICT_DECREASE:
+            return False
+        if self.key_after(move) in self.tabu:
+            self.tabu_hits += 1
+            return False
+        return True
+
+    def decide(self, n: int, m: int) -> bool:
+        """One iteration of Algorithm 1 for AAV n on its chosen task m."""
+        move = self.move(n, m)
+        accepted = self.acceptable(move)
+        if accepted:
+            assert move is not None
+            self._apply(move)
+        else:
+            self.rejected[n].add(m)
+        op = move.op if move is not None else (REMOVE if m in self.removable(n) else ADD)
+        self.decisions.append(Decision(len(self.decisions), n, m, op, accepted,
+                                       self.trajectory[-1]))
+        return accepted
+
+    def _apply(self, move: Move) -> None:
+        n, proposal = move.aav, move.proposal
+        old = dict(self.plan.traces[n].contributions)
+        new = dict(proposal.trace.contributions)
+        changed = {m for m in old.keys() | new.keys() if old.get(m) != new.get(m)}
+        self.key = self.key_after(move)
+        self._aav_keys[n] = structure_key(n, proposal.trace.route, self.n_tasks)
+        self.plan.apply(proposal)
+        self.tabu.add(self.key)
+        self.trajectory.append(self.plan.cost)
+        # Forget the rejections whose outcome this move may have changed (module docstring).
+        self.rejected[n].clear()
+        stale = {k for m in changed for k in self.plan.members[m]}
+        for k in range(self.n_aavs):
+            if k in stale:
+                self.rejected[k].clear()
+            else:
+                self.rejected[k] -= changed
+
+    # --- Algorithm 1 -------------------------------------------------------------------
+    def run(self, rule: SelectionRule, rng: np.random.Generator, *, k_max: int, c_max: int,
+            deadline: float | None = None) -> str:
+        """Play until a stop condition; returns which one: "stable", "k_max", "c_max" or
+        "time-limit"."""
+        consecutive = 0
+        while True:
+            decided = False
+            for n in rng.permutation(self.n_aavs).tolist():
+                if len(self.decisions) >= k_max:
+                    return "k_max"
+                if consecutive >= c_max:
+                    return "c_max"
+                if deadline is not None and time.perf_counter() > deadline:
+                    return "time-limit"
+                candidates = self.candidates(n)
+                if not candidates:
+                    continue
+                decided = True
+                m = rule.select(DecisionView(self, n, candidates), rng)
+                if m not in candidates:
+                    raise ValueError(f"{type(rule).__name__} chose task {m}, which is not "
+                                     f"a candidate of AAV {n}")
+                consecutive = 0 if self.decide(n, m) else consecutive + 1
+            if not decided:
+                return "stable"
+
+
+# --- the decision interface of selection rules ----------------------------------------
+#: Columns of ``DecisionView.agent_features`` (lengths in km, times in horizons, kg in the
+#: AAV's capacity).
+AGENT_FEATURES = ("x_km", "y_km", "time", "speed", "capacity", "range_left_km", "alpha",
+                  "lam", "free_visits", "delivery_load", "pickup_load")
+#: Columns of ``DecisionView.task_features`` (one row per visible task).
+TASK_FEATURES = ("x_km", "y_km", "is_delivery", "demand", "residual", "t_start", "t_end",
+                 "release", "coalition_size", "covered", "member", "own_amount",
+                 "distance_km", "slack", "candidate")
+#: Columns of ``DecisionView.depot_features``.
+DEPOT_FEATURES = ("x_km", "y_km", "distance_km")
+
+
+@dataclass(frozen=True)
+class DecisionView:
+    """What the deciding AAV sees (Eq. 20's state): itself, the visible tasks with their
+    residual demand and coalition feedback, the depots; and its candidate tasks."""
+
+    game: CoalitionGame
+    aav: int
+    candidates: tuple[int, ...]
+
+    @property
+    def anchor(self) -> Anchor:
+        return self.game.anchor(self.aav)
+
+    def is_member(self, m: int) -> bool:
+        return self.aav in self.game.plan.members[m]
+
+    def residual(self, m: int) -> int:
+        return self.game.residual(self.aav, m)
+
+    def earliest_arrival(self, m: int) -> float:
+        return self.game.earliest_arrival(self.aav, m)
+
+    def agent_features(self) -> np.ndarray:
+        game, n = self.game, self.aav
+        aav, instance = game.instance.aavs[n], game.instance
+        anchor = self.anchor
+        x, y = instance.positions[anchor.node]
+        ff = game.first_free[n]
+        trace = game.plan.traces[n]
+        d, p = (trace.delivery_load[ff - 1], trace.pickup_load[ff - 1]) if ff else (0, 0)
+        return np.array([x / 1000, y / 1000, anchor.time / instance.horizon, aav.speed,
+                         aav.capacity, (aav.max_range - anchor.flown) / 1000, aav.alpha,
+                         aav.lam, len(trace.route) - ff, d / aav.capacity,
+                         p / aav.capacity], dtype=float)
+
+    def task_features(self) -> np.ndarray:
+        """One row per visible task (``game.visible`` order), columns ``TASK_FEATURES``."""
+        game, n = self.game, self.aav
+        instance = game.instance
+        anchor = self.anchor
+        candidates = set(self.candidates)
+        rows = []
+        for m in game.visible:
+            task = instance.tasks[m]
+            members = game.plan.members[m]
+            own = members.get(n)
+            distance = game._dist[anchor.node][m]
+            slack = task.t_end - (anchor.time + distance / instance.aavs[n].speed)
+            rows.append((task.x / 1000, task.y / 1000, float(task.is_delivery), task.demand,
+                         game.residual(n, m), task.t_start / instance.horizon,
+                         task.t_end / instance.horizon, task.release / instance.horizon,
+                         len(members), game.plan.covered(m), float(own is not None),
+                         own.amount if own is not None else 0, distance / 1000,
+                         slack / instance.horizon, float(m in candidates)))
+        return np.array(rows, dtype=float).reshape(-1, len(TASK_FEATURES))
+
+    def depot_features(self) -> np.ndarray:
+        instance = self.game.instance
+        row = self.game._dist[self.anchor.node]
+        return np.array([(d.x / 1000, d.y / 1000, row[k] / 1000) for k, d in
+                         zip(instance.depot_nodes, instance.depots, strict=True)],
+                        dtype=float).reshape(-1, len(DEPOT_FEATURES))
+
+
+class SelectionRule(Protocol):
+    """Picks the task the deciding AAV acts on, one of ``view.candidates``."""
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int: ...
+
+
+# --- the allocators built on the game ---------------------------------------------------
+INITS = ("incumbent", "empty", "greedy")
+
+
+class OCFAllocator(Settings, ABC):
+    """Common driver of the OCF methods; subclasses supply the selection rule.
+
+    Settings: ``k_max`` (most decisions per plan call), ``c_max`` (most consecutive
+    rejections), ``init``, the structure the game starts from: ``"incumbent"`` (the plan in
+    force, without what is no longer visible; the committed prefixes alone at t = 0),
+    ``"empty"`` (the committed prefixes alone) or ``"greedy"`` (the ``greedy`` method's
+    plan of this planning state)."""
+
+    name: ClassVar[str]
+
+    def __init__(self, k_max: int = 200_000, c_max: int = 5_000,
+                 init: str = "incumbent") -> None:
+        if k_max < 0 or c_max < 1:
+            raise ValueError("k_max must be >= 0 and c_max >= 1")
+        if init not in INITS:
+            raise ValueError(f"init must be one of {', '.join(INITS)}, got {init!r}")
+        self.k_max = k_max
+        self.c_max = c_max
+        self.init = init
+
+    def initial_routes(self, state: PlanningState) -> tuple[Route, ...]:
+        if self.init == "incumbent":
+            return state.warm_routes()
+        if self.init == "greedy":
+            from tsac_bench.solvers.greedy import GreedyAllocator
+
+            return GreedyAllocator().plan(state).routes
+        return state.base_routes()
+
+    @abstractmethod
+    def rule(self, state: PlanningState) -> SelectionRule:
+        """The selection rule for one plan call."""
+
+    def plan(self, state: PlanningState, *, seed: int = 0,
+             time_limit: float | None = None) -> PlanResult:
+        began = time.perf_counter()
+        deadline = None if time_limit is None else began + time_limit
+        game = CoalitionGame(state, self.initial_routes(state))
+        stop = game.run(self.rule(state), np.random.default_rng(seed), k_max=self.k_max,
+                        c_max=self.c_max, deadline=deadline)
+        accepted = len(game.trajectory) - 1
+        stats: dict[str, Any] = {
+            "stop": stop,
+            "decisions": len(game.decisions),
+            "accepted": accepted,
+            "rejected": len(game.decisions) - accepted,
+            "tabu_hits": game.tabu_hits,
+            "J_initial": game.trajectory[0],
+            "trajectory": game.trajectory,
+            "seconds": time.perf_counter() - began,
+        }
+        cost = game.cost
+        assert math.isfinite(cost)
+        return PlanResult(game.plan.routes, stats, cost)

@@ -1,0 +1,184 @@
+"""The dynamic run of MODEL.md: plan at t = 0, re-plan at every release time with the
+committed prefixes fixed, evaluate the executed routes from scratch.
+
+Rules (docs/model.md, "The dynamic run"):
+
+* At t = 0 the allocator sees the tasks released at 0 and plans freely.
+* At each distinct release time t_e > 0, AAV n's committed prefix is every visit k of the
+  plan in force whose previous node it has left by t_e (tau_{k-1} <= t_e; the start position
+  counts as left at time 0). The allocator then plans again and may change anything after the
+  prefixes, never the prefixes.
+* The allocator sees the released tasks that are not yet finished. A task is *finished* at
+  t_e when its committed visits already cover its demand on time, or when its window has
+  closed (t_end < t_e): no visit a re-plan adds can lower its cost then (C_load is already 0
+  or no new visit can be on time; an extra visit only adds C_op or makes C_time 1).
+* Every plan is checked: it must keep every prefix, visit only visible tasks and be feasible.
+  A plan that breaks a rule stops the run with ``InvalidPlan``.
+* The executed routes are the last plan's routes (nothing changes after the last event);
+  they are evaluated from scratch. Tasks never served cost w1 + w2 like any other.
+
+An AAV whose plan has ended (or is empty) may receive new visits at a re-plan; Eq. 7 times
+them from its last arrival (MODEL.md has no idle wait). The release guarantee is an
+information guarantee: an allocator only ever sees released tasks and cannot change a
+committed prefix.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tsac_bench.allocator import Allocator, PlanningState, PlanResult
+from tsac_bench.errors import TsacBenchError
+from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator, Evaluation, RouteTrace
+from tsac_bench.model import Instance, Route
+
+
+class InvalidPlan(TsacBenchError):
+    """An allocator returned routes its planning state forbids, or infeasible routes."""
+
+    exit_code = 1
+
+
+@dataclass(frozen=True)
+class CheckedPlan:
+    """One plan call that passed every check, with the evaluator's verdict."""
+
+    result: PlanResult
+    evaluation: Evaluation
+    wall_time: float
+
+
+def checked_plan(allocator: Allocator, state: PlanningState, *, seed: int,
+                 time_limit: float | None) -> CheckedPlan:
+    """Call ``allocator.plan`` and reject what the state forbids or the evaluator refuses."""
+    instance = state.instance
+    began = time.perf_counter()
+    result = allocator.plan(state, seed=seed, time_limit=time_limit)
+    wall = time.perf_counter() - began
+    where = f"{allocator.name} on {instance.name} at t={state.time:g}"
+    problems = state.violations(result.routes)
+    if problems:
+        raise InvalidPlan(f"{where}: " + "; ".join(problems))
+    evaluation = CostEvaluator(instance).evaluate(result.routes)
+    if not evaluation.feasible:
+        raise InvalidPlan(f"{where}: infeasible plan: "
+                          + "; ".join(str(e) for e in evaluation.errors))
+    return CheckedPlan(result, evaluation, wall)
+
+
+def committed_prefixes(traces: Sequence[RouteTrace], t: float) -> tuple[Route, ...]:
+    """Every AAV's visits already under way at time ``t`` > 0: visit k is committed when the
+    AAV left visit k-1 by ``t`` (it leaves a node at its arrival tau_{k-1}); visit 0 always,
+    its start being left at time 0."""
+    prefixes = []
+    for trace in traces:
+        route = trace.route
+        if not route:
+            prefixes.append(())
+            continue
+        length = 1 + sum(1 for tau in trace.arrivals[:-1] if tau <= t)
+        prefixes.append(route[:length])
+    return tuple(prefixes)
+
+
+def finished_tasks(instance: Instance, traces: Sequence[RouteTrace],
+                   prefixes: Sequence[Route], t: float) -> frozenset[int]:
+    """Tasks a re-plan at ``t`` can no longer improve: window closed (t_end < t) or demand
+    covered on time by committed visits."""
+    covered = [0] * instance.n_tasks
+    for trace, prefix in zip(traces, prefixes, strict=True):
+        for (m, amount), arrival in zip(prefix, trace.arrivals, strict=False):
+            if m < instance.n_tasks and arrival <= instance.tasks[m].t_end + TIME_TOLERANCE:
+                covered[m] += amount
+    return frozenset(m for m, task in enumerate(instance.tasks)
+                     if task.t_end < t or covered[m] >= task.demand)
+
+
+@dataclass(frozen=True)
+class Replan:
+    """One planning moment of a run: what was known, what was fixed, what the plan costs.
+
+    ``J`` is the plan's cost over every task of the instance (MODEL.md); ``J_known`` over the
+    tasks released by ``time`` and ``J_known_before`` the same for the plan in force just
+    before (the new tasks still unserved): the jump and drop of the paper's Fig. 5 curve."""
+
+    time: float
+    released: tuple[str, ...]
+    visible: int
+    committed: int
+    J: float
+    J_known: float
+    J_known_before: float | None
+    wall_time: float
+    claimed_cost: float | None = None  # the plan's J as the allocator computed it
+    stats: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"time": self.time, "released": list(self.released), "visible": self.visible,
+                "committed": self.committed, "J": self.J, "J_known": self.J_known,
+                "J_known_before": self.J_known_before, "wall_time": self.wall_time,
+                "claimed_cost": self.claimed_cost, "stats": dict(self.stats)}
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    routes: tuple[Route, ...]
+    evaluation: Evaluation
+    replans: tuple[Replan, ...]
+    wall_time: float  # time spent inside the allocator's plan calls
+
+
+def release_times(instance: Instance) -> list[float]:
+    """The distinct release times after 0, in order: the events of a dynamic run."""
+    return sorted({float(t.release) for t in instance.tasks if t.release > 0})
+
+
+def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
+             time_limit: float | None = None) -> SimulationResult:
+    """Run ``allocator`` through the release events of ``instance``.
+
+    ``time_limit`` is the budget of each plan call (an online decision), not of the run. Plan
+    call i gets its own seed derived from (seed, i), so equal seeds give equal runs."""
+    evaluator = CostEvaluator(instance)
+    released_at = [t.release for t in instance.tasks]
+
+    def known_cost(evaluation: Evaluation, t: float) -> float:
+        return math.fsum(b.cost.total for m, b in enumerate(evaluation.per_task)
+                         if released_at[m] <= t)
+
+    state = PlanningState(instance, 0.0, instance.released_by(0.0))
+    replans: list[Replan] = []
+    plan: CheckedPlan | None = None
+    total_wall = 0.0
+    for i, t in enumerate([0.0, *release_times(instance)]):
+        if plan is not None:
+            traces = plan.evaluation.traces
+            prefixes = committed_prefixes(traces, t)
+            visible = instance.released_by(t) - finished_tasks(instance, traces, prefixes, t)
+            state = PlanningState(instance, t, visible, prefixes, plan.result.routes)
+        before = None if plan is None else known_cost(plan.evaluation, t)
+        plan_seed = int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
+        plan = checked_plan(allocator, state, seed=plan_seed, time_limit=time_limit)
+        total_wall += plan.wall_time
+        assert plan.evaluation.J is not None
+        replans.append(Replan(
+            time=t,
+            released=tuple(instance.tasks[m].id for m, r in enumerate(released_at) if r == t),
+            visible=len(state.visible),
+            committed=sum(len(p) for p in state.committed),
+            J=plan.evaluation.J,
+            J_known=known_cost(plan.evaluation, t),
+            J_known_before=before,
+            wall_time=plan.wall_time,
+            claimed_cost=plan.result.cost,
+            stats=dict(plan.result.stats),
+        ))
+    assert plan is not None
+    final = evaluator.evaluate(plan.result.routes)
+    return SimulationResult(plan.result.routes, final, tuple(replans), total_wall)

@@ -71,7 +71,7 @@ class HOCFAllocator(OCFAllocator):
 
     def __init__(self, w_urgency: float = 1.0, w_distance: float = 2.0,
                  w_residual: float = 1.0, k_max: int = 200_000, c_max: int = 5_000,
-                 init: str = "incumbent") -> None:
+                 init: str = "empty") -> None:
         super().__init__(k_max=k_max, c_max=c_max, init=init)
         self.w_urgency = w_urgency
         self.w_distance = w_distance

@@ -343,22 +343,22 @@ class SelectionRule(Protocol):
 
 
 # --- the allocators built on the game ---------------------------------------------------
-INITS = ("incumbent", "empty", "greedy")
+INITS = ("empty", "incumbent", "greedy")
 
 
 class OCFAllocator(Settings, ABC):
     """Common driver of the OCF methods; subclasses supply the selection rule.
 
     Settings: ``k_max`` (most decisions per plan call), ``c_max`` (most consecutive
-    rejections), ``init``, the structure the game starts from: ``"incumbent"`` (the plan in
-    force, without what is no longer visible; the committed prefixes alone at t = 0),
-    ``"empty"`` (the committed prefixes alone) or ``"greedy"`` (the ``greedy`` method's
-    plan of this planning state)."""
+    rejections), ``init``, the structure the game starts from: ``"empty"`` (the committed
+    prefixes alone: every plan call forms the coalitions afresh), ``"incumbent"`` (the plan
+    in force, without what is no longer visible; the committed prefixes alone at t = 0) or
+    ``"greedy"`` (the ``greedy`` method's plan of this planning state)."""
 
     name: ClassVar[str]
 
     def __init__(self, k_max: int = 200_000, c_max: int = 5_000,
-                 init: str = "incumbent") -> None:
+                 init: str = "empty") -> None:
         if k_max < 0 or c_max < 1:
             raise ValueError("k_max must be >= 0 and c_max >= 1")
         if init not in INITS:

@@ -148,10 +148,13 @@ def solve(
     = "greedy",
     seed: Annotated[int, typer.Option()] = 0,
     time_limit: Annotated[float | None, typer.Option(help="seconds")] = None,
-    mode: Annotated[str, typer.Option(help="static")] = "static",
+    mode: Annotated[str, typer.Option(help="static (every task known at t=0) or dynamic "
+                                      "(re-plan at each release time)")] = "static",
     out: Annotated[Path | None, typer.Option(help="write the solution JSON here")] = None,
 ) -> None:
-    """Run one method on one instance and print J."""
+    """Run one method on one instance and print J (dynamic: also J after each re-plan).
+
+    --time-limit is the budget of each plan call."""
     from tsac_bench.io import read_instance, write_solution
     from tsac_bench.solve import solve as run_solve
 
@@ -159,7 +162,16 @@ def solve(
     outcome = run_solve(instance, method, seed=seed, time_limit=time_limit, mode=mode)
     if out is not None:
         write_solution(outcome.solution, instance, out)
-    console.print(f"{instance.name}  {method}  J = {outcome.cost:.6f}  "
+    if mode == "dynamic":
+        table = Table("t (s)", "released", "visible", "committed", "J known before",
+                      "J known", "J", "plan (s)")
+        for r in outcome.stats["replans"]:
+            before = r["J_known_before"]
+            table.add_row(f"{r['time']:g}", " ".join(r["released"]) or "-", str(r["visible"]),
+                          str(r["committed"]), "-" if before is None else f"{before:.4f}",
+                          f"{r['J_known']:.4f}", f"{r['J']:.4f}", f"{r['wall_time']:.3f}")
+        console.print(table)
+    console.print(f"{instance.name}  {method}  {mode}  J = {outcome.cost:.6f}  "
                   f"({outcome.wall_time:.3f} s)")
 
 

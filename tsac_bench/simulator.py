@@ -143,8 +143,8 @@ def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
              time_limit: float | None = None) -> SimulationResult:
     """Run ``allocator`` through the release events of ``instance``.
 
-    ``time_limit`` is the budget of each plan call (an online decision), not of the run. Plan
-    call i gets its own seed derived from (seed, i), so equal seeds give equal runs."""
+    ``time_limit`` is the budget of each plan call (an online decision), not of the run.
+    Equal seeds give equal runs."""
     evaluator = CostEvaluator(instance)
     released_at = [t.release for t in instance.tasks]
 
@@ -163,7 +163,10 @@ def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
             visible = instance.released_by(t) - finished_tasks(instance, traces, prefixes, t)
             state = PlanningState(instance, t, visible, prefixes, plan.result.routes)
         before = None if plan is None else known_cost(plan.evaluation, t)
-        plan_seed = int(np.random.SeedSequence([seed, i]).generate_state(1)[0])
+        # The first call gets the run's seed itself, so a run without events is exactly
+        # the static plan call; later calls get independent seeds derived from it.
+        plan_seed = seed if i == 0 else int(np.random.SeedSequence([seed, i])
+                                            .generate_state(1)[0])
         plan = checked_plan(allocator, state, seed=plan_seed, time_limit=time_limit)
         total_wall += plan.wall_time
         assert plan.evaluation.J is not None

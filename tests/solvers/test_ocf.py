@@ -1,0 +1,298 @@
+"""The OCF game engine (solvers/ocf.py) and its two selection rules, rocf and hocf."""
+
+import itertools
+
+import numpy as np
+import pytest
+from solver_cases import DEPOTS, aav, edge_cases, paper_x20, quick, task
+from tsac_bench.solvers.hocf import HeuristicSelection
+from tsac_bench.solvers.ocf import (
+    AGENT_FEATURES,
+    DEPOT_FEATURES,
+    STRICT_DECREASE,
+    TASK_FEATURES,
+    CoalitionGame,
+    DecisionView,
+    Move,
+)
+from tsac_bench.solvers.rocf import UniformSelection
+
+from tsac_bench.allocator import PlanningState, make_allocator
+from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.generator import generate
+from tsac_bench.insertion import best_insertion, removal_route
+from tsac_bench.model import Instance, Visit
+from tsac_bench.simulator import simulate
+from tsac_bench.solve import solve
+
+
+def rule_for(name, instance):
+    if name == "rocf":
+        return UniformSelection()
+    return HeuristicSelection(instance, 1.0, 2.0, 1.0)
+
+
+def small_instances():
+    yield from (quick(n) for n in ("quick-2-4-s1", "quick-3-6-s3", "quick-4-10-s5"))
+    yield paper_x20()
+    yield edge_cases()["one-aav"]
+    yield from (generate("3/6", seed) for seed in range(4))
+
+
+def play(state, rule_name, seed=0, **limits):
+    game = CoalitionGame(state)
+    stop = game.run(rule_for(rule_name, state.instance), np.random.default_rng(seed),
+                    k_max=limits.get("k_max", 10**6), c_max=limits.get("c_max", 10**6))
+    return game, stop
+
+
+def improving_moves(game):
+    """Every single-AAV ADD or REMOVE that lowers J and is not tabu, found without the
+    engine's candidate lists (only tasks beyond the AAV's range are skipped: the mask)."""
+    found = []
+    plan, instance = game.plan, game.instance
+    for n in range(instance.n_aavs):
+        ff = game.first_free[n]
+        route = game.route(n)
+        anchor = game.anchor(n)
+        for m in sorted(game.state.visible):
+            if any(v.node == m for v in route[:ff]):
+                continue
+            if any(v.node == m for v in route):
+                proposal, op = plan.propose(n, removal_route(instance, route, m, ff)), "remove"
+            else:
+                if anchor.flown + instance.dist[anchor.node, m] > instance.aavs[n].max_range:
+                    continue
+                proposal, op = best_insertion(plan, n, m, ff), "add"
+            if proposal is None or proposal.delta >= -STRICT_DECREASE:
+                continue
+            if game.key_after(Move(op, n, m, proposal)) in game.tabu:
+                continue
+            found.append((n, m, op, proposal.delta))
+    return found
+
+
+@pytest.mark.parametrize("rule", ["rocf", "hocf"])
+def test_every_accepted_move_strictly_lowers_J_and_the_trajectory_shows_it(rule):
+    for instance in small_instances():
+        game, _ = play(PlanningState.static(instance), rule, seed=1)
+        trajectory = game.trajectory
+        assert trajectory[0] == instance.unserved_task_cost * instance.n_tasks
+        assert all(b - a < -STRICT_DECREASE for a, b in itertools.pairwise(trajectory))
+        accepted = [d.J for d in game.decisions if d.accepted]
+        assert accepted == trajectory[1:]
+        # The incremental J agrees with a from-scratch evaluation of the final routes.
+        assert trajectory[-1] == pytest.approx(CostEvaluator(instance).cost(game.plan.routes),
+                                               rel=1e-12, abs=1e-9)
+
+
+@pytest.mark.parametrize("rule", ["rocf", "hocf"])
+def test_the_final_structure_is_nash_stable(rule):
+    for instance in small_instances():
+        for seed in range(2):
+            game, stop = play(PlanningState.static(instance), rule, seed=seed)
+            assert stop == "stable"
+            assert improving_moves(game) == [], instance.name
+
+
+@pytest.mark.parametrize("rule", ["rocf", "hocf"])
+def test_a_replan_game_keeps_the_prefixes_and_ends_stable(rule):
+    instance = generate("6/15", seed=8)
+    states = []
+
+    class Capture:
+        name = "capture"
+
+        def plan(self, state, *, seed=0, time_limit=None):
+            states.append(state)
+            return make_allocator(rule).plan(state, seed=seed)
+
+    simulate(instance, Capture())
+    late = states[-1]
+    assert any(late.committed)
+    game, stop = play(late, rule, seed=3)
+    assert stop == "stable"
+    assert late.violations(game.plan.routes) == []
+    assert improving_moves(game) == []
+
+
+def test_a_move_that_revisits_a_tabu_structure_is_rejected():
+    instance = quick("quick-2-4-s1")
+    game = CoalitionGame(PlanningState.static(instance))
+    n, m = 0, next(m for m in game.valid_tasks(0))
+    move = game.move(n, m)
+    assert move.op == "add" and game.acceptable(move)
+    game.tabu.add(game.key_after(move))
+    assert not game.acceptable(move)
+    assert game.tabu_hits == 1
+    assert not game.decide(n, m) and game.decisions[-1].accepted is False
+    assert m in game.rejected[n]
+
+
+def test_structure_key_ignores_order_and_depots_but_not_amounts():
+    instance = quick("quick-3-6-s3")
+    game = CoalitionGame(PlanningState.static(instance))
+    depot = instance.depot_nodes[0]
+    a = game.plan.propose(0, (Visit(depot), Visit(1, 5), Visit(4, 5), Visit(depot)))
+    b = game.plan.propose(0, (Visit(4, 5), Visit(depot), Visit(1, 5), Visit(depot)))
+    c = game.plan.propose(0, (Visit(depot), Visit(1, 4), Visit(4, 5), Visit(depot)))
+    keys = [game.key_after(Move("add", 0, 1, p)) for p in (a, b, c)]
+    assert keys[0] == keys[1] != keys[2]
+
+
+def residual_case() -> Instance:
+    """T0 (20 kg, window [0, 390]): A0 brings 10 kg on time, A1 5 kg late; A2 is free."""
+    return Instance("residual", (aav("A0", 1), aav("A1", 2), aav("A2", 2)), DEPOTS, (
+        task("T0", 2000, 0, 20, window=(0, 390)), task("T1", -1000, 0, 5)))
+
+
+def test_residual_demand_is_eq_19_as_each_aav_sees_it():
+    instance = residual_case()
+    d0, d1 = instance.depot_nodes
+    routes = ((Visit(d0), Visit(0, 10), Visit(d0)),  # arrives at 200 s: on time
+              ((Visit(d1), Visit(1, 5), Visit(d1), Visit(0, 5), Visit(d1))),  # 600 s: late
+              ())
+    game = CoalitionGame(PlanningState.static(instance), routes)
+    assert [game.residual(n, 0) for n in range(3)] == [20, 10, 10]
+    view = DecisionView(game, 2, tuple(game.valid_tasks(2)))
+    features = view.task_features()
+    assert features.shape == (2, len(TASK_FEATURES))
+    column = dict(zip(TASK_FEATURES, features[0], strict=True))
+    assert column["residual"] == 10 and column["coalition_size"] == 2
+    assert column["covered"] == 10 and column["member"] == 0
+    assert view.agent_features().shape == (len(AGENT_FEATURES),)
+    assert view.depot_features().shape == (2, len(DEPOT_FEATURES))
+    # HOCF's ineffective-resource exit: A1's late visit does nothing, it leaves first.
+    hocf = HeuristicSelection(instance, 1.0, 2.0, 1.0)
+    a1 = DecisionView(game, 1, tuple(game.valid_tasks(1)))
+    assert 0 in a1.candidates and hocf.select(a1, np.random.default_rng(0)) == 0
+
+
+def test_the_validity_mask():
+    instance = residual_case()
+    d0 = instance.depot_nodes[0]
+    game = CoalitionGame(PlanningState.static(instance),
+                         ((Visit(d0), Visit(0, 20), Visit(d0)), (), ()))
+    # T0 is fully covered by A0: nothing left for A1 or A2 to join. A0 may leave it.
+    assert game.valid_tasks(0) == [0, 1]
+    assert game.valid_tasks(1) == [1] == game.valid_tasks(2)
+    # From a committed visit to T1 ending at 100 s, T0 (3 km away, closes at 390 s) is out
+    # of reach for A0 (10 m/s) and the committed T1 cannot be removed.
+    late = PlanningState(instance, 50.0, frozenset({0, 1}),
+                         committed=((Visit(d0), Visit(1, 5)), (), ()))
+    game = CoalitionGame(late)
+    assert game.anchor(0).time == 100.0 and game.valid_tasks(0) == []
+    assert game.valid_tasks(1) == [0]
+
+
+def test_uniform_selection_is_uniform_over_the_candidates():
+    game = CoalitionGame(PlanningState.static(quick("quick-3-6-s3")))
+    view = DecisionView(game, 0, (1, 3, 4))
+    rng = np.random.default_rng(0)
+    counts = np.bincount([UniformSelection().select(view, rng) for _ in range(3000)],
+                         minlength=5)
+    assert counts[[0, 2]].sum() == 0
+    assert all(900 <= c <= 1100 for c in counts[[1, 3, 4]])
+
+
+def test_hocf_prefers_the_nearer_of_two_otherwise_equal_tasks():
+    instance = Instance("near-far", (aav("A0", 1),), DEPOTS, (
+        task("T0", 0, 4000, 10), task("T1", 0, 1000, 10)))
+    game = CoalitionGame(PlanningState.static(instance))
+    view = DecisionView(game, 0, tuple(game.valid_tasks(0)))
+    hocf = HeuristicSelection(instance, 1.0, 2.0, 1.0)
+    near, far = hocf.priority(view, 1), hocf.priority(view, 0)
+    d_max = float(instance.dist.max())
+    # Same window and share. Proximity differs by 3 km; urgency by the 300 s more slack
+    # the near task leaves (it is reached earlier), against it.
+    assert near - far == pytest.approx(2.0 * 3000 / d_max - 300 / 3600, rel=1e-12)
+    assert hocf.select(view, np.random.default_rng(0)) == 1
+
+
+def test_stop_conditions():
+    state = PlanningState.static(generate("4/10", seed=2))
+    game = CoalitionGame(state)
+    assert game.run(UniformSelection(), np.random.default_rng(0), k_max=0, c_max=5) == "k_max"
+    assert game.decisions == [] and game.plan.routes == state.base_routes()
+    game = CoalitionGame(state)
+    stop = game.run(UniformSelection(), np.random.default_rng(0), k_max=10**6, c_max=1)
+    assert stop == "c_max" and game.decisions[-1].accepted is False
+    game = CoalitionGame(state)
+    assert game.run(UniformSelection(), np.random.default_rng(0), k_max=10**6, c_max=10,
+                    deadline=0.0) == "time-limit"
+    result = make_allocator("rocf").plan(state, time_limit=0.0)
+    assert result.stats["stop"] == "time-limit" and result.stats["decisions"] == 0
+
+
+def test_a_rule_must_pick_a_candidate():
+    class Wrong:
+        def select(self, view, rng):
+            return -1
+
+    game = CoalitionGame(PlanningState.static(quick("quick-2-4-s1")))
+    with pytest.raises(ValueError, match="not a candidate"):
+        game.run(Wrong(), np.random.default_rng(0), k_max=10, c_max=10)
+
+
+@pytest.mark.parametrize("method", ["rocf", "hocf"])
+def test_allocator_result_and_settings(method):
+    instance = generate("8/20", seed=6)
+    outcome = solve(instance, method, seed=5)
+    stats = outcome.stats
+    assert stats["stop"] == "stable"
+    assert stats["accepted"] + stats["rejected"] == stats["decisions"]
+    assert stats["trajectory"][-1] == pytest.approx(outcome.cost, rel=1e-12)
+    assert outcome.claimed_cost == pytest.approx(outcome.cost, rel=1e-12)
+    assert outcome.solution.meta["settings"]["init"] == "empty"
+    again = solve(instance, method, seed=5)
+    assert again.solution.routes == outcome.solution.routes
+    with pytest.raises(ValueError, match="init must be one of"):
+        make_allocator(method, init="random")
+
+
+@pytest.mark.parametrize("method", ["rocf", "hocf"])
+def test_greedy_start_never_ends_above_greedy(method):
+    for seed in range(3):
+        instance = generate("6/15", seed=seed)
+        greedy = solve(instance, "greedy").cost
+        assert solve(instance, method, settings={"init": "greedy"}).cost <= greedy
+
+
+def test_incumbent_start_is_the_warm_plan():
+    instance = generate("6/15", seed=9)
+    states = []
+
+    class Capture:
+        name = "capture"
+
+        def plan(self, state, *, seed=0, time_limit=None):
+            states.append(state)
+            return make_allocator("hocf").plan(state, seed=seed)
+
+    simulate(instance, Capture())
+    state = states[-1]
+    warm = state.warm_routes()
+    assert state.violations(warm) == []
+    result = make_allocator("hocf", init="incumbent").plan(state)
+    assert result.stats["J_initial"] == pytest.approx(CostEvaluator(instance).cost(warm))
+    assert result.cost <= result.stats["J_initial"]
+
+
+def test_an_accepted_move_forgets_exactly_the_rejections_it_may_have_changed():
+    instance = generate("4/10", seed=1)
+    game = CoalitionGame(PlanningState.static(instance))
+    game.run(UniformSelection(), np.random.default_rng(0), k_max=12, c_max=10**6)
+    everything = set(range(instance.n_tasks))
+    for n in range(instance.n_aavs):
+        game.rejected[n] = set(everything)
+    n = 1
+    move = next(mv for m in game.valid_tasks(n) if (mv := game.move(n, m)) is not None
+                and game.acceptable(mv))
+    old = dict(game.plan.traces[n].contributions)
+    new = dict(move.proposal.trace.contributions)
+    changed = {m for m in old.keys() | new.keys() if old.get(m) != new.get(m)}
+    game._apply(move)
+    stale = {k for m in changed for k in game.plan.members[m]} | {n}
+    for k in range(instance.n_aavs):
+        assert game.rejected[k] == (set() if k in stale else everything - changed)
+    assert changed and any(k not in stale for k in range(instance.n_aavs))

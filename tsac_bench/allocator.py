@@ -179,7 +179,10 @@ def allocator_class(name: str) -> Callable[..., Allocator]:
             raise MethodUnavailable(f"method {name!r} needs {exc.name!r}: "
                                     f"pip install -e '.[all]'") from None
     if name in plugins:
-        return plugins[name].load()
+        try:
+            return plugins[name].load()
+        except ImportError as exc:
+            raise MethodUnavailable(f"plug-in method {name!r} needs {exc.name!r}") from None
     raise UnknownMethodError(name, available_methods())
 
 

@@ -23,10 +23,10 @@ with the lowest priority first.
 from __future__ import annotations
 
 import numpy as np
-from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
 
 from tsac_bench.allocator import PlanningState
 from tsac_bench.model import Instance
+from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
 
 
 class HeuristicSelection:

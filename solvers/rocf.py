@@ -8,9 +8,9 @@ Everything else is the shared engine of ``solvers/ocf.py``.
 from __future__ import annotations
 
 import numpy as np
-from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
 
 from tsac_bench.allocator import PlanningState
+from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
 
 
 class UniformSelection:

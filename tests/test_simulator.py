@@ -5,7 +5,6 @@ import math
 from dataclasses import replace
 
 import pytest
-from tsac_bench.solvers.greedy import GreedyAllocator
 
 from tsac_bench.allocator import PlanningState, PlanResult
 from tsac_bench.evaluator import CostEvaluator
@@ -13,6 +12,7 @@ from tsac_bench.generator import generate
 from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind, Visit
 from tsac_bench.simulator import InvalidPlan, committed_prefixes, simulate
 from tsac_bench.solve import solve
+from tsac_bench.solvers.greedy import GreedyAllocator
 
 HEAVY = dict(speed=10.0, capacity=30, max_range=60_000.0, alpha=20.0, lam=2000.0)
 

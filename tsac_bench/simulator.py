@@ -10,8 +10,9 @@ Rules (docs/model.md, "The dynamic run"):
   prefixes, never the prefixes.
 * The allocator sees the released tasks that are not yet finished. A task is *finished* at
   t_e when its committed visits already cover its demand on time, or when its window has
-  closed (t_end < t_e): no visit a re-plan adds can lower its cost then (C_load is already 0
-  or no new visit can be on time; an extra visit only adds C_op or makes C_time 1).
+  closed (t_end < t_e): a visit made after t_e cannot lower its cost (C_load is already 0
+  or the visit is late; it only adds C_op or makes C_time 1). Hiding closed tasks also keeps
+  an idle AAV, timed from its last arrival, from serving a task "in the past".
 * Every plan is checked: it must keep every prefix, visit only visible tasks and be feasible.
   A plan that breaks a rule stops the run with ``InvalidPlan``.
 * The executed routes are the last plan's routes (nothing changes after the last event);

@@ -5,6 +5,14 @@ import itertools
 import numpy as np
 import pytest
 from solver_cases import DEPOTS, aav, edge_cases, paper_x20, quick, task
+
+from tsac_bench.allocator import PlanningState, make_allocator
+from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.generator import generate
+from tsac_bench.insertion import best_insertion, removal_route
+from tsac_bench.model import Instance, Visit
+from tsac_bench.simulator import simulate
+from tsac_bench.solve import solve
 from tsac_bench.solvers.hocf import HeuristicSelection
 from tsac_bench.solvers.ocf import (
     AGENT_FEATURES,
@@ -16,14 +24,6 @@ from tsac_bench.solvers.ocf import (
     Move,
 )
 from tsac_bench.solvers.rocf import UniformSelection
-
-from tsac_bench.allocator import PlanningState, make_allocator
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
-from tsac_bench.insertion import best_insertion, removal_route
-from tsac_bench.model import Instance, Visit
-from tsac_bench.simulator import simulate
-from tsac_bench.solve import solve
 
 
 def rule_for(name, instance):

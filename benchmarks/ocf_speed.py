@@ -1,0 +1,92 @@
+"""OCF speed and quality: wall time of one rocf / hocf allocation (one static plan call) at
+16/40 and 32/80, and J against greedy, static and dynamic.
+
+Goal (issue 4): a 32/80 allocation within 5 s on one core; rocf and hocf below greedy's J on
+average. Run by hand, pinned to one core:
+    python benchmarks/ocf_speed.py [--instances 5] [--first-seed 100]
+Writes reports/ocf-speed.md. Instances are generated (tsac_bench.generator, default
+settings) with seeds first-seed .. first-seed + instances - 1; the method seed is 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+from pathlib import Path
+
+from tsac_bench.generator import generate
+from tsac_bench.solve import solve
+
+SCALES = ("16/40", "32/80")
+#: (label, method, settings): the defaults, then the OCF games started from greedy's plan.
+VARIANTS = (
+    ("greedy", "greedy", {}),
+    ("rocf", "rocf", {}),
+    ("hocf", "hocf", {}),
+    ("rocf init=greedy", "rocf", {"init": "greedy"}),
+    ("hocf init=greedy", "hocf", {"init": "greedy"}),
+)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--instances", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=100)
+    parser.add_argument("--out", type=Path, default=Path("reports/ocf-speed.md"))
+    args = parser.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    seeds = range(args.first_seed, args.first_seed + args.instances)
+    lines = [
+        "# OCF speed and quality (rocf, hocf against greedy)",
+        "",
+        f"Command: `python benchmarks/ocf_speed.py --instances {args.instances} "
+        f"--first-seed {args.first_seed}`  ",
+        f"Machine: {platform.processor() or platform.machine()}, Python "
+        f"{platform.python_version()}, pinned to one core. Generated instances (default "
+        f"generator), seeds {seeds.start}..{seeds.stop - 1}; method seed 0. Wall time is one "
+        "static plan call; J is the evaluator's. Dynamic: the simulator's run (t = 0 and the "
+        "generator's two release events), J of the executed routes.",
+        "",
+    ]
+    summary = ["| scale | method | mean J static | mean J dynamic | below greedy (static) | "
+               "mean wall (s) | max wall (s) | mean decisions |",
+               "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for scale in SCALES:
+        instances = [generate(scale, seed) for seed in seeds]
+        results: dict[str, list] = {}
+        for label, method, settings in VARIANTS:
+            for instance in instances:
+                static = solve(instance, method, settings=settings, seed=0)
+                dynamic = solve(instance, method, settings=settings, seed=0, mode="dynamic")
+                results.setdefault(label, []).append((static, dynamic))
+        greedy = [s.cost for s, _ in results["greedy"]]
+        lines += [f"## {scale}", "",
+                  "| seed | " + " | ".join(f"{label} J (s)" for label, _, _ in VARIANTS) + " |",
+                  "|---:|" + "---:|" * len(VARIANTS)]
+        for i, seed in enumerate(seeds):
+            cells = [f"{results[label][i][0].cost:.2f} ({results[label][i][0].wall_time:.3f})"
+                     for label, _, _ in VARIANTS]
+            lines.append(f"| {seed} | " + " | ".join(cells) + " |")
+        lines.append("")
+        for label, _, _ in VARIANTS:
+            runs = results[label]
+            walls = [s.wall_time for s, _ in runs]
+            below = sum(s.cost < g - 1e-9 for (s, _), g in zip(runs, greedy, strict=True))
+            decisions = [s.stats.get("decisions") for s, _ in runs]
+            mean_decisions = (f"{statistics.mean(decisions):.0f}"
+                              if None not in decisions else "-")
+            summary.append(
+                f"| {scale} | {label} | {statistics.mean(s.cost for s, _ in runs):.2f} | "
+                f"{statistics.mean(d.cost for _, d in runs):.2f} | {below}/{len(runs)} | "
+                f"{statistics.mean(walls):.3f} | {max(walls):.3f} | {mean_decisions} |")
+    lines += ["## Summary", "", *summary, ""]
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

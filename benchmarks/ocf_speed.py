@@ -51,6 +51,7 @@ def main() -> None:
         "generator's two release events), J of the executed routes.",
         "",
     ]
+    goals = []
     summary = ["| scale | method | mean J static | mean J dynamic | below greedy (static) | "
                "mean wall (s) | max wall (s) | mean decisions |",
                "|---|---|---:|---:|---:|---:|---:|---:|"]
@@ -78,11 +79,23 @@ def main() -> None:
             decisions = [s.stats.get("decisions") for s, _ in runs]
             mean_decisions = (f"{statistics.mean(decisions):.0f}"
                               if None not in decisions else "-")
+            if label in ("rocf", "hocf"):
+                mean_static = statistics.mean(s.cost for s, _ in runs)
+                mean_dynamic = statistics.mean(d.cost for _, d in runs)
+                goals.append(
+                    f"- {scale} {label}: max wall {max(walls):.3f} s"
+                    + (f" ({'meets' if max(walls) <= 5 else 'misses'} the 5 s goal)"
+                       if scale == "32/80" else "")
+                    + f"; mean J {mean_static:.2f} static / {mean_dynamic:.2f} dynamic against "
+                    f"greedy's {statistics.mean(greedy):.2f} / "
+                    f"{statistics.mean(d.cost for _, d in results['greedy']):.2f}: "
+                    + ("below" if mean_static < statistics.mean(greedy) else "NOT below")
+                    + " greedy (static)")
             summary.append(
                 f"| {scale} | {label} | {statistics.mean(s.cost for s, _ in runs):.2f} | "
                 f"{statistics.mean(d.cost for _, d in runs):.2f} | {below}/{len(runs)} | "
                 f"{statistics.mean(walls):.3f} | {max(walls):.3f} | {mean_decisions} |")
-    lines += ["## Summary", "", *summary, ""]
+    lines += ["## Summary", "", *summary, "", "## Goals (issue 4)", "", *goals, ""]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -103,6 +103,8 @@ class Settings:
 #: Built-in methods by name, as "module:Class" so that listing them imports nothing heavy.
 BUILTIN_METHODS: dict[str, str] = {
     "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
+    "dga": "tsac_bench.solvers.dga:DGAAllocator",
+    "cnp": "tsac_bench.solvers.cnp:ContractNetAllocator",
 }
 
 _registered: dict[str, Callable[..., Allocator]] = {}

@@ -37,13 +37,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from tsac_bench.solvers.cnp import InvalidSetting, incumbent_routes
 
 from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.evaluator import CostEvaluator, PlanState
 from tsac_bench.insertion import best_insertion, removal_route
 from tsac_bench.io import instance_from_dict, instance_to_dict
 from tsac_bench.model import Route, Visit
+from tsac_bench.solvers.cnp import InvalidSetting, incumbent_routes
 
 #: A change must lower J by more than float noise to count as an improvement.
 GAIN_TOLERANCE = 1e-9

@@ -2,12 +2,6 @@ import math
 
 import pytest
 from replan import replan_state
-from tsac_bench.solvers.cnp import (
-    ContractNetAllocator,
-    ContractNetManager,
-    InvalidSetting,
-    incumbent_routes,
-)
 
 from tsac_bench.allocator import PlanningState
 from tsac_bench.evaluator import CostEvaluator
@@ -15,6 +9,12 @@ from tsac_bench.generator import generate
 from tsac_bench.io import instance_from_dict
 from tsac_bench.model import Instance, Visit
 from tsac_bench.solve import solve
+from tsac_bench.solvers.cnp import (
+    ContractNetAllocator,
+    ContractNetManager,
+    InvalidSetting,
+    incumbent_routes,
+)
 
 # Type-2 AAVs of TABLE 1: 20 m/s, 10 kg, 30 km, alpha 10; E_base = 10 * 30 + 500 = 800.
 LIGHT = {"type": 2, "speed": 20, "capacity": 10, "max_range": 30000, "alpha": 10, "lam": 500}

@@ -2,8 +2,6 @@ import itertools
 
 import pytest
 from replan import replan_state
-from tsac_bench.solvers.cnp import InvalidSetting, incumbent_routes
-from tsac_bench.solvers.dga import DGAAllocator
 
 from tsac_bench.allocator import PlanningState
 from tsac_bench.evaluator import CostEvaluator
@@ -11,6 +9,8 @@ from tsac_bench.generator import generate
 from tsac_bench.io import instance_from_dict
 from tsac_bench.model import Visit
 from tsac_bench.solve import solve
+from tsac_bench.solvers.cnp import InvalidSetting, incumbent_routes
+from tsac_bench.solvers.dga import DGAAllocator
 
 SMALL = {"islands": 2, "population": 4, "generations": 6, "migration_interval": 3}
 

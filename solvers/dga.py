@@ -41,7 +41,6 @@ import numpy as np
 from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.evaluator import CostEvaluator, PlanState
 from tsac_bench.insertion import best_insertion, removal_route
-from tsac_bench.io import instance_from_dict, instance_to_dict
 from tsac_bench.model import Route, Visit
 from tsac_bench.solvers.cnp import InvalidSetting, incumbent_routes
 
@@ -262,10 +261,9 @@ class Problem:
 _worker_problem: Problem | None = None
 
 
-def _start_worker(payload: dict[str, Any]) -> None:
+def _start_worker(state: PlanningState, settings: dict[str, Any]) -> None:
     global _worker_problem
-    state = PlanningState(instance_from_dict(payload.pop("instance")), **payload.pop("state"))
-    _worker_problem = Problem(state, **payload)
+    _worker_problem = Problem(state, **settings)
 
 
 def _evolve_in_worker(population: list[Individual] | None, size: int,
@@ -321,12 +319,8 @@ class DGAAllocator(Settings):
         rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(self.islands)]
         populations: list[list[Individual] | None] = [None] * self.islands
         if self.workers:
-            payload = {"instance": instance_to_dict(state.instance),
-                       "state": {"time": state.time, "visible": state.visible,
-                                 "committed": state.committed, "incumbent": state.incumbent},
-                       **self._problem_settings()}
             with ProcessPoolExecutor(min(self.workers, self.islands), initializer=_start_worker,
-                                     initargs=(payload,)) as pool:
+                                     initargs=(state, self._problem_settings())) as pool:
                 history, done, stop = self._run(
                     populations, rngs, deadline,
                     lambda jobs: list(pool.map(_evolve_in_worker, *zip(*jobs, strict=True))))

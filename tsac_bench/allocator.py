@@ -132,6 +132,8 @@ BUILTIN_METHODS: dict[str, str] = {
     "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
     "hocf": "tsac_bench.solvers.hocf:HOCFAllocator",
     "rocf": "tsac_bench.solvers.rocf:ROCFAllocator",
+    "dga": "tsac_bench.solvers.dga:DGAAllocator",
+    "cnp": "tsac_bench.solvers.cnp:ContractNetAllocator",
     "pyvrp": "tsac_bench.solvers.pyvrp_peer:PyVRPAllocator",
 }
 

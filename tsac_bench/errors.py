@@ -36,3 +36,7 @@ class UnknownMethodError(TsacBenchError, KeyError):
 
     def __str__(self) -> str:
         return str(self.args[0])
+
+
+class InvalidSetting(TsacBenchError, ValueError):
+    """A method setting outside its documented range."""

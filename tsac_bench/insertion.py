@@ -7,7 +7,7 @@ lowest J of the whole plan, never a proxy.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 from tsac_bench.evaluator import PlanState, Proposal, RouteTrace
 from tsac_bench.model import Instance, Route, Visit
@@ -56,10 +56,12 @@ def max_amount(instance: Instance, trace: RouteTrace, index: int) -> int:
 
 
 def best_insertion(state: PlanState, n: int, task: int, first_free: int = 0,
-                   residual: int | None = None) -> Proposal | None:
+                   residual: int | None = None,
+                   admissible: Callable[[Proposal], bool] | None = None) -> Proposal | None:
     """The cheapest feasible insertion of ``task`` into AAV n's route, carrying as much of
     ``residual`` (default: the task's demand not yet covered on time by other AAVs) as fits.
-    None when no insertion is feasible or the task needs nothing more."""
+    ``admissible`` vetoes candidates by a method's own rule (e.g. CNP's binding contracts).
+    None when no insertion is feasible (and admissible) or the task needs nothing more."""
     evaluator = state.evaluator
     instance = evaluator.instance
     route = state.traces[n].route
@@ -78,7 +80,9 @@ def best_insertion(state: PlanState, n: int, task: int, first_free: int = 0,
         if amount != 1:
             candidate = (*candidate[:index], Visit(task, amount), *candidate[index + 1:])
         proposal = state.propose(n, candidate)
-        if proposal is not None and (best is None or proposal.delta < best.delta):
+        if proposal is None or (admissible is not None and not admissible(proposal)):
+            continue
+        if best is None or proposal.delta < best.delta:
             best = proposal
     return best
 

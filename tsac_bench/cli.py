@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.table import Table
 
 from tsac_bench.errors import TsacBenchError
+from tsac_bench.worker import GRACE_SECONDS
 
 app = typer.Typer(
     name="tsac-bench",
@@ -204,6 +205,8 @@ def run(
                                                      "exact methods 20, others 10")] = None,
     jobs: Annotated[int | None, typer.Option(min=1, help="parallel jobs (default: CPU "
                                              "count)")] = None,
+    grace: Annotated[float, typer.Option(help="seconds a job may overrun 1.5 x its time limit "
+                                         "before its process is killed")] = GRACE_SECONDS,
     executor: Annotated[str, typer.Option(help="local or dask")] = "local",
     scheduler: Annotated[str | None, typer.Option(help="Dask scheduler address (default: a "
                                                   "LocalCluster)")] = None,
@@ -225,7 +228,7 @@ def run(
         paths=list(paths), out=out, seeds=seeds, time_limit=time_limit, mode=mode,
         methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
         jobs=jobs or os.cpu_count() or 1, executor=executor, scheduler=scheduler,
-        retry_failed=retry_failed)
+        retry_failed=retry_failed, grace=grace)
     outcome = run_batch(config, note=say_error,
                         progress=progress)
     _print_summary(out)

@@ -25,7 +25,7 @@ from typing import Any
 from tsac_bench.errors import InputError, TsacBenchError
 from tsac_bench.model import Instance
 from tsac_bench.store import ResultStore, job_key
-from tsac_bench.worker import hard_timeout
+from tsac_bench.worker import GRACE_SECONDS, hard_timeout
 
 #: Methods that prove optimality; their static runs may supply J* (see ``report``).
 EXACT_METHODS = ("exact", "exact-cpsat")
@@ -186,7 +186,7 @@ def method_label(method: str, polish: bool) -> str:
 
 def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[str],
               modes: Sequence[str], seeds: int, time_limit: float | None,
-              polish: bool = False) -> list[Job]:
+              polish: bool = False, grace: float = GRACE_SECONDS) -> list[Job]:
     jobs = []
     for loaded in instances:
         instance = loaded.instance
@@ -199,7 +199,7 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[str],
                     key = job_key(instance.name, label, mode, seed)
                     spec = {"key": key, "instance": loaded.data, "instance_file": str(loaded.path),
                             "method": method, "mode": mode, "seed": seed, "time_limit": limit,
-                            "settings": {}, "polish": polish}
+                            "settings": {}, "polish": polish, "grace": grace}
                     row = {"key": key, "instance": instance.name,
                            "instance_set": loaded.instance_set,
                            "instance_file": str(loaded.path), "scale": instance.scale,
@@ -263,6 +263,7 @@ class RunConfig:
     scheduler: str | None = None
     polish: bool = False
     retry_failed: bool = False
+    grace: float = GRACE_SECONDS
 
 
 def execute(config: RunConfig, specs: list[dict[str, Any]]) -> Iterator[tuple[dict, dict]]:
@@ -284,6 +285,8 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
         raise TsacBenchError("--seeds: must be at least 1")
     if config.time_limit is not None and config.time_limit <= 0:
         raise TsacBenchError("--time-limit: must be positive")
+    if config.grace < 0:
+        raise TsacBenchError("--grace: must be >= 0")
     modes = resolve_modes(config.mode)
     methods, method_notes = resolve_methods(config.methods)
     if not methods:
@@ -292,7 +295,8 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
     outcome = BatchOutcome(config.out, problems=problems)
     for line in [*method_notes, *problems]:
         note(line)
-    jobs = plan_jobs(loaded, methods, modes, config.seeds, config.time_limit, config.polish)
+    jobs = plan_jobs(loaded, methods, modes, config.seeds, config.time_limit, config.polish,
+                     config.grace)
     outcome.total = len(jobs)
     with ResultStore(config.out) as store:
         done = store.finished_keys(["ok"] if config.retry_failed else None)

@@ -32,8 +32,8 @@ _VERSIONED_PACKAGES = {
     "ortools": "ortools", "cvxpy": "cvxpy", "torch": "torch", "gymnasium": "gymnasium",
 }
 
-#: Seconds a job may overrun its solver time limit (imports, evaluation, process start-up)
-#: before its process is killed.
+#: Default seconds a job may overrun its solver time limit (imports, evaluation) before its
+#: process is killed; a spec's ``grace`` overrides it.
 GRACE_SECONDS = 30.0
 
 
@@ -48,7 +48,7 @@ def hard_timeout(spec: dict[str, Any]) -> float | None:
     plans = 1
     if spec["mode"] != "static":
         plans += len({t["release"] for t in spec["instance"]["tasks"] if t.get("release", 0) > 0})
-    return plans * float(limit) * 1.5 + GRACE_SECONDS
+    return plans * float(limit) * 1.5 + float(spec.get("grace", GRACE_SECONDS))
 
 
 def failure(status: str, message: str, detail: str = "") -> dict[str, Any]:

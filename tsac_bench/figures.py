@@ -67,7 +67,7 @@ def draw_all(frame: pd.DataFrame, instances: pd.DataFrame, run_dir: Path,
                             [_save(coalition_figure(data), out / f"coalitions-{mode}")],
                             "Mean number of AAVs serving a task, over the served tasks of every "
                             "run, by demand."))
-    figures.append(_gantt(frame, loader, out))
+    figures.append(dynamic_gantt(frame, loader, out))
     maps = list(_route_maps(frame, loader, out))
     if maps:
         figures.append(("Route maps (one instance per scale)", maps,
@@ -97,28 +97,28 @@ def box_plots(rows: pd.DataFrame) -> Any:
 
 
 # --- performance profiles ----------------------------------------------------------------
-def performance_profile(rows: pd.DataFrame) -> tuple[dict[str, np.ndarray], np.ndarray, str]:
-    """Dolan-More profiles: for each method, the share of instances whose ratio
-    J / J_ref <= tau, over a grid of tau. J_ref is J* where known, else the best J any method
-    reached on the instance; an instance a method did not solve counts as never within tau."""
+def performance_ratios(rows: pd.DataFrame) -> tuple[pd.DataFrame, str]:
+    """Dolan-More ratios J / J_ref per instance (rows) and method (columns). J_ref is J*
+    where known, else the best J any method reached on the instance; an instance a method did
+    not solve has ratio inf (never within any tau). Also returns what J_ref was."""
     wide = rows.pivot(index="instance", columns="method", values="J")
     j_star = rows.groupby("instance")["J_star"].first().reindex(wide.index)
     known = j_star.where(j_star > 0)
     reference = known.fillna(wide.min(axis=1))
-    ratios = wide.div(reference, axis=0)
-    finite = ratios.to_numpy()[np.isfinite(ratios.to_numpy())]
-    top = max(1.0 + 1e-9, float(finite.max()) if finite.size else 1.0)
-    taus = np.linspace(1.0, top * 1.02, 400)
-    profiles = {m: np.array([(ratios[m] <= t).mean() for t in taus]) for m in wide.columns}
+    ratios = wide.div(reference, axis=0).fillna(np.inf)
     basis = "J*" if known.notna().all() else ("J* where known, else the best J found"
                                               if known.notna().any() else "the best J found")
-    return profiles, taus, basis
+    return ratios, basis
 
 
 def _profile(rows: pd.DataFrame, mode: str, out: Path) -> Figure:
-    profiles, taus, basis = performance_profile(rows)
+    ratios, basis = performance_ratios(rows)
+    values = ratios.to_numpy()
+    top = max(1.0 + 1e-9, float(values[np.isfinite(values)].max(initial=1.0)))
+    taus = np.linspace(1.0, top * 1.02, 400)
     fig, ax = plt.subplots(figsize=(5.2, 3.6))
-    for method, share in sorted(profiles.items()):
+    for method in sorted(ratios.columns):
+        share = [(ratios[method] <= tau).mean() for tau in taus]
         ax.step((taus - 1.0) * 100.0, share, where="post", label=method)
     ax.set_xlabel(f"gap to {'J*' if basis == 'J*' else 'reference'} (%)")
     ax.set_ylabel("share of instances within the gap")
@@ -155,7 +155,7 @@ def coalition_figure(data: pd.DataFrame) -> Any:
 
 
 # --- Fig. 5 ------------------------------------------------------------------------------
-def _gantt(frame: pd.DataFrame, loader: SolutionLoader, out: Path) -> Figure:
+def dynamic_gantt(frame: pd.DataFrame, loader: SolutionLoader, out: Path) -> Figure:
     title = "Dynamic run: AAV visits and cost after each re-plan (paper Fig. 5)"
     ok = frame[(frame["status"] == OK) & (frame["mode"] == "dynamic")].sort_values("key")
     if ok.empty:
@@ -192,6 +192,7 @@ def gantt_figure(instance: Any, solution: Any, events: list[dict[str, Any]], tit
     ax = axes[0][0]
     colours = plt.get_cmap("tab20")
     ids = instance.node_ids
+    end = 0.0
     for n, route in enumerate(solution.routes):
         trace = evaluator.trace(n, route)
         prev, clock = instance.start_node(n), 0.0
@@ -206,6 +207,7 @@ def gantt_figure(instance: Any, solution: Any, events: list[dict[str, Any]], tit
             label = ids[visit.node] if depot else f"{ids[visit.node]}:{visit.amount}"
             ax.text(clock + flight / 2, n, label, ha="center", va="center", fontsize=6)
             prev, clock = visit.node, arrival
+        end = max(end, clock)
     ax.set_yticks(range(instance.n_aavs), [a.id for a in instance.aavs])
     ax.invert_yaxis()
     ax.set_title(title)
@@ -216,6 +218,8 @@ def gantt_figure(instance: Any, solution: Any, events: list[dict[str, Any]], tit
     if events:
         times = [float(e["time"]) for e in events]
         costs = [float(e["J"]) for e in events]
+        times.append(max(end, times[-1]))  # the last plan's cost holds to the end
+        costs.append(costs[-1])
         cost_ax = axes[1][0]
         cost_ax.step(times, costs, where="post", marker="o")
         cost_ax.set_ylabel("J after re-plan")

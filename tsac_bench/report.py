@@ -162,6 +162,8 @@ class SolutionLoader:
         from tsac_bench.io import read_instance
 
         path = row["instance_file"]
+        if not isinstance(path, str):
+            return None
         if path not in self._instances:
             try:
                 self._instances[path] = read_instance(path)

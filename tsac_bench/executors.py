@@ -9,19 +9,31 @@ timeout and a crashed one (segfault, ``os._exit``) is recorded; the batch goes o
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 from collections.abc import Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from tsac_bench.worker import execute_job, failure, hard_timeout, run_in_subprocess
+from tsac_bench.worker import (
+    execute_job,
+    failure,
+    hard_timeout,
+    kill_group,
+    run_in_subprocess,
+)
 
 Spec = dict[str, Any]
 Result = dict[str, Any]
 
 
 def _serve(conn: Connection) -> None:
-    """A worker process's loop: one job in, one result out, until the driver goes away."""
+    """A worker process's loop: one job in, one result out, until the driver goes away.
+
+    The worker leads its own process group, so that killing a hung job also kills the
+    processes its solver started (a CP-SAT or HiGHS helper process)."""
+    if hasattr(os, "setsid"):
+        os.setsid()
     while True:
         try:
             spec = conn.recv()
@@ -35,7 +47,8 @@ class _Worker:
 
     def __init__(self, context: Any) -> None:
         self.conn, child = context.Pipe()
-        self.process = context.Process(target=_serve, args=(child,), daemon=True)
+        # Not a daemon: a daemonic process may not start the solver processes some methods use.
+        self.process = context.Process(target=_serve, args=(child,))
         self.process.start()
         child.close()
         self.spec: Spec | None = None
@@ -48,7 +61,7 @@ class _Worker:
         self.conn.send(spec)
 
     def kill(self) -> None:
-        self.process.kill()
+        kill_group(self.process.pid)
         self.process.join()
         self.conn.close()
 

@@ -5,7 +5,8 @@
 * mean coalition size against task demand per method (Fig. 6, coalitions computed by the
   evaluator from the stored solutions);
 * for one dynamic instance, a Gantt chart of every AAV's visits with the cost after each
-  re-plan (Fig. 5) where the run's stats carry the simulator's ``events``;
+  re-plan (Fig. 5) where the run's stats carry the simulator's re-plans (``replans``, each
+  with ``time`` and ``J``, optionally ``J_known`` / ``J_known_before``);
 * route maps of one instance per scale.
 
 Imported only by ``report``: ``import tsac_bench`` never loads matplotlib.
@@ -160,7 +161,7 @@ def dynamic_gantt(frame: pd.DataFrame, loader: SolutionLoader, out: Path) -> Fig
     ok = frame[(frame["status"] == OK) & (frame["mode"] == "dynamic")].sort_values("key")
     if ok.empty:
         return title, [], "No dynamic run in this results store."
-    has_events = ok["stats"].map(lambda s: bool(isinstance(s, dict) and s.get("events")))
+    has_events = ok["stats"].map(lambda s: bool(replan_curve(s)[0]))
     chosen = ok[has_events] if has_events.any() else ok
     instance_name = chosen.iloc[0]["instance"]
     rows = chosen[(chosen["instance"] == instance_name)]
@@ -171,21 +172,46 @@ def dynamic_gantt(frame: pd.DataFrame, loader: SolutionLoader, out: Path) -> Fig
         if loaded is None:
             continue
         instance, solution = loaded
-        fig = gantt_figure(instance, solution, row["stats"].get("events") or [],
+        fig = gantt_figure(instance, solution, replan_curve(row["stats"]),
                            f"{instance.name}: {row['method']} (J = {row['J']:.2f})")
         paths.append(_save(fig, out / f"gantt-{instance.name}-{row['method']}"))
-    note = "" if has_events.any() else ("The runs carry no re-plan events (stats['events']): "
+    note = "" if has_events.any() else ("The runs carry no re-plans (stats['replans']): "
                                         "only the visits are drawn.")
     return title, paths, note
 
 
-def gantt_figure(instance: Any, solution: Any, events: list[dict[str, Any]], title: str) -> Any:
+def replan_curve(stats: Any) -> tuple[list[float], list[float], str]:
+    """The cost curve of a dynamic run from its stats: times, costs and what the cost is.
+
+    With ``J_known`` (the cost over the tasks known so far) the curve jumps up when tasks are
+    released (``J_known_before``: the new tasks still unserved) and drops with the re-plan, as
+    in the paper's Fig. 5; otherwise it is J over all tasks after each re-plan."""
+    replans = (stats.get("replans") or stats.get("events") or []) if isinstance(stats,
+                                                                              dict) else []
+    times: list[float] = []
+    costs: list[float] = []
+    known = bool(replans) and all(isinstance(r, dict) and r.get("J_known") is not None
+                                  for r in replans)
+    for r in replans:
+        if not isinstance(r, dict) or r.get("time") is None or r.get("J") is None:
+            return [], [], ""
+        if known and r.get("J_known_before") is not None:
+            times.append(float(r["time"]))
+            costs.append(float(r["J_known_before"]))
+        times.append(float(r["time"]))
+        costs.append(float(r["J_known"] if known else r["J"]))
+    return times, costs, "J of the released tasks" if known else "J after re-plan"
+
+
+def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[float], str],
+                 title: str) -> Any:
     """Top: one lane per AAV, a bar per leg (flight solid, waiting for the window hatched),
-    labelled with the node it reaches. Bottom (when events are given): J after each re-plan."""
+    labelled with the node it reaches. Bottom (when the run has re-plans): its cost curve."""
+    times, costs, label = curve
     from tsac_bench.evaluator import CostEvaluator
 
     evaluator = CostEvaluator(instance)
-    lanes = 2 if events else 1
+    lanes = 2 if times else 1
     fig, axes = plt.subplots(lanes, 1, figsize=(9, 1.0 + 0.55 * instance.n_aavs + 2.2 *
                                                 (lanes - 1)), squeeze=False, sharex=True,
                              gridspec_kw={"height_ratios": [max(2, instance.n_aavs), 2][:lanes]})
@@ -215,14 +241,12 @@ def gantt_figure(instance: Any, solution: Any, events: list[dict[str, Any]], tit
     for t in releases:
         for row in axes:
             row[0].axvline(t, color="r", ls="--", lw=0.8)
-    if events:
-        times = [float(e["time"]) for e in events]
-        costs = [float(e["J"]) for e in events]
-        times.append(max(end, times[-1]))  # the last plan's cost holds to the end
-        costs.append(costs[-1])
+    if times:
+        times = [*times, max(end, times[-1])]  # the last plan's cost holds to the end
+        costs = [*costs, costs[-1]]
         cost_ax = axes[1][0]
         cost_ax.step(times, costs, where="post", marker="o")
-        cost_ax.set_ylabel("J after re-plan")
+        cost_ax.set_ylabel(label)
         cost_ax.grid(alpha=0.3)
     axes[-1][0].set_xlabel("time (s); dashed: task releases")
     fig.tight_layout()

@@ -15,7 +15,9 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import platform
+import signal
 import socket
 import subprocess
 import sys
@@ -150,17 +152,34 @@ def run_in_subprocess(spec: dict[str, Any]) -> dict[str, Any]:
         spec_file, result_file = Path(tmp, "spec.json"), Path(tmp, "result.json")
         spec_file.write_text(json.dumps(spec), encoding="utf-8")
         timeout = hard_timeout(spec)
+        # A new session: on timeout the whole group goes, solver helper processes included.
+        process = subprocess.Popen([sys.executable, "-m", "tsac_bench.worker", str(spec_file),
+                                    str(result_file)], stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True, start_new_session=True)
         try:
-            done = subprocess.run([sys.executable, "-m", "tsac_bench.worker", str(spec_file),
-                                   str(result_file)], capture_output=True, text=True,
-                                  timeout=timeout, check=False)
+            _, stderr = process.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
+            kill_group(process.pid)
+            process.communicate()
             return failure("timeout", f"killed after {timeout:g} s (time limit "
                                       f"{spec.get('time_limit')} s)")
         if result_file.exists():
             return json.loads(result_file.read_text(encoding="utf-8"))
-        return failure("crash", f"worker process exited with code {done.returncode}",
-                       done.stderr[-4000:])
+        return failure("crash", f"worker process exited with code {process.returncode}",
+                       stderr[-4000:])
+
+
+def kill_group(pid: int) -> None:
+    """SIGKILL the process group led by ``pid``, or just the process where it leads none
+    (yet: a worker killed before its ``setsid``; or no process groups on this platform)."""
+    sigkill = getattr(signal, "SIGKILL", signal.SIGTERM)
+    try:
+        os.killpg(pid, sigkill)
+        return
+    except (AttributeError, ProcessLookupError, PermissionError):
+        pass
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.kill(pid, sigkill)
 
 
 def main(argv: list[str] | None = None) -> None:

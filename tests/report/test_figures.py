@@ -21,7 +21,7 @@ HAND_SOLUTION = HAND.parent / "hand-solution.json"
 @pytest.fixture
 def run_dir(tmp_path) -> Path:
     """Method "a" is hand-solution.json (one AAV per task); method "b" sends both AAVs to
-    T1 (20 kg delivery, 10 kg each). Both in both modes; the dynamic runs carry events."""
+    T1 (20 kg delivery, 10 kg each). Both in both modes; the dynamic runs carry re-plans."""
     instance = read_instance(HAND)
     solutions = {
         "a": read_solution(HAND_SOLUTION, instance),
@@ -35,7 +35,9 @@ def run_dir(tmp_path) -> Path:
             for mode in ("static", "dynamic"):
                 relative = store.solution_path("data", "hand", method, mode, 0)
                 write_solution(solution, instance, run / relative)
-                events = [{"time": 0.0, "J": 300.0}, {"time": 250.0, "J": evaluation.J}]
+                replans = [{"time": 0.0, "J": 300.0, "J_known": 100.0, "J_known_before": None},
+                           {"time": 250.0, "J": evaluation.J, "J_known": evaluation.J,
+                            "J_known_before": 290.0}]
                 store.record({
                     "key": job_key("hand", method, mode, 0), "instance": "hand",
                     "instance_set": "data", "instance_file": str(HAND), "scale": "2/4",
@@ -43,7 +45,7 @@ def run_dir(tmp_path) -> Path:
                     "J": evaluation.J, "J_load": evaluation.terms["load"],
                     "J_time": evaluation.terms["time"], "J_op": evaluation.terms["op"],
                     "solution_file": str(relative), "host": "test", "versions": {},
-                    "stats": {"events": events} if mode == "dynamic" else {}})
+                    "stats": {"replans": replans} if mode == "dynamic" else {}})
     return run
 
 
@@ -67,14 +69,14 @@ def test_the_report_draws_every_figure_as_png_and_pdf(run_dir, tmp_path):
             path = out / "figures" / (name + suffix)
             assert path.stat().st_size > 1000, path
         assert f"figures/{name}.png" in index
-    assert "only the visits are drawn" not in index  # the events were used
+    assert "only the visits are drawn" not in index  # the re-plans were used
     assert "## Static mode" in index and "## Dynamic mode" in index
     per_instance = pd.read_csv(out / "tables" / "per_instance.csv")
     assert sorted(per_instance["J"].round(6)) == sorted(
         [212.821528, 212.821528, *[np.round(_b_cost(), 6)] * 2])
 
 
-def test_gantt_without_events_is_drawn_with_a_note(run_dir, tmp_path):
+def test_gantt_without_replans_is_drawn_with_a_note(run_dir, tmp_path):
     with ResultStore(run_dir) as store:
         for row in store.rows():
             if row["mode"] == "dynamic":
@@ -94,3 +96,17 @@ def _b_cost() -> float:
     instance = read_instance(HAND)
     return CostEvaluator(instance).cost(Solution.from_ids(
         instance, {"A0": ["D0", ("T1", 10), "D0"], "A1": ["D0", ("T1", 10), "D0"]}))
+
+
+def test_the_replan_curve_jumps_at_releases_and_drops_with_the_replan():
+    from tsac_bench.figures import replan_curve
+
+    stats = {"replans": [
+        {"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
+        {"time": 90.0, "J": 150.0, "J_known": 40.0, "J_known_before": 130.0}]}
+    assert replan_curve(stats) == ([0.0, 90.0, 90.0], [20.0, 130.0, 40.0],
+                                   "J of the released tasks")
+    plain = {"replans": [{"time": 0.0, "J": 300.0}, {"time": 90.0, "J": 150.0}]}
+    assert replan_curve(plain) == ([0.0, 90.0], [300.0, 150.0], "J after re-plan")
+    assert replan_curve({}) == ([], [], "J after re-plan")
+    assert replan_curve({"replans": [{"J": 1.0}]}) == ([], [], "")

@@ -200,9 +200,10 @@ def run(
     mode: Annotated[str, typer.Option(help="static, dynamic, both, or auto (static, plus "
                                       "dynamic where supported)")] = "auto",
     seeds: Annotated[int, typer.Option(min=1, help="seeds 0..N-1 per job")] = 1,
-    time_limit: Annotated[float | None, typer.Option(help="solver seconds per job (per plan "
-                                                     "in a dynamic run); default per method: "
-                                                     "exact methods 20, others 10")] = None,
+    time_limit: Annotated[float | None, typer.Option(help="solver seconds per plan call (a "
+                                                     "dynamic job plans once per event too); "
+                                                     "default per 10 tasks: exact methods 10, "
+                                                     "others 2")] = None,
     jobs: Annotated[int | None, typer.Option(min=1, help="parallel jobs (default: CPU "
                                              "count)")] = None,
     grace: Annotated[float, typer.Option(help="seconds a job may overrun 1.5 x its time limit "

@@ -34,7 +34,6 @@ COLUMNS: dict[str, str] = {
     "method": "TEXT NOT NULL",
     "mode": "TEXT NOT NULL",
     "seed": "INTEGER NOT NULL",
-    "polish": "INTEGER NOT NULL DEFAULT 0",
     "settings": "TEXT",  # JSON
     "time_limit": "REAL",
     "status": "TEXT NOT NULL",

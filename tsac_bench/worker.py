@@ -22,7 +22,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-import time
 import traceback
 from importlib import metadata
 from pathlib import Path
@@ -72,8 +71,6 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
                         time_limit=spec.get("time_limit"), mode=spec["mode"],
                         settings=spec.get("settings") or {})
         solution, evaluation, stats = outcome.solution, outcome.evaluation, dict(outcome.stats)
-        if spec.get("polish"):
-            solution, evaluation, stats = _polished(instance, solution, stats)
     except InvalidPlan as exc:
         return failure("invalid", str(exc))
     except TsacBenchError as exc:
@@ -85,23 +82,6 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
             "terms": dict(evaluation.terms), "runtime": outcome.wall_time,
             "stats": jsonable(stats), "versions": _versions(spec["method"]),
             "host": socket.gethostname()}
-
-
-def _polished(instance: Any, solution: Any, stats: dict[str, Any]) -> tuple[Any, Any, dict]:
-    from tsac_bench.evaluator import CostEvaluator
-    from tsac_bench.polish import polish
-    from tsac_bench.solve import InvalidPlan
-
-    began = time.perf_counter()
-    before = solution.cost
-    polished = polish(instance, solution)
-    evaluation = CostEvaluator(instance).evaluate(polished)
-    if not evaluation.feasible:
-        raise InvalidPlan("polish returned an infeasible solution: "
-                          + "; ".join(str(e) for e in evaluation.errors))
-    stats = {**stats, "polish": {"J_before": before, "J_after": evaluation.J,
-                                 "seconds": time.perf_counter() - began}}
-    return polished.with_cost(evaluation.J), evaluation, stats
 
 
 def jsonable(value: Any) -> Any:

@@ -188,3 +188,12 @@ def test_export_csv_and_parquet_hold_every_row(tmp_path, two_instances):
     assert list(parquet["J"]) == [stored[k]["J"] for k in sorted(stored)]
     assert list(csv["J"]) == pytest.approx(list(parquet["J"]), rel=1e-15)
     assert json.loads(parquet["versions"][0])["tsac-bench"]
+
+
+def test_default_time_limits_grow_with_the_task_count():
+    from tsac_bench.runner import default_time_limit
+
+    assert default_time_limit("greedy", 4) == 2.0
+    assert default_time_limit("greedy", 80) == 16.0
+    assert default_time_limit("exact", 10) == 10.0
+    assert default_time_limit("exact-cpsat", 40) == 40.0

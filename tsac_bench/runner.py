@@ -14,7 +14,6 @@ import json
 import os
 import shlex
 import sys
-import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -219,7 +218,7 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[str],
 
 
 # --- recording ---------------------------------------------------------------------------
-def record_result(store: ResultStore, job: Job, result: dict[str, Any], job_time: float) -> str:
+def record_result(store: ResultStore, job: Job, result: dict[str, Any]) -> str:
     """Write one finished job (solution file, then its row); returns its status.
 
     The stored J is recomputed here by the evaluator from the solution as written to the file,
@@ -229,7 +228,7 @@ def record_result(store: ResultStore, job: Job, result: dict[str, Any], job_time
 
     row = {**job.row, "status": result["status"], "message": result["message"],
            "detail": result.get("detail") or None, "runtime": result["runtime"],
-           "job_time": job_time, "stats": result["stats"], "versions": result["versions"],
+           "stats": result["stats"], "versions": result["versions"],
            "host": result["host"], "J": None, "J_load": None, "J_time": None, "J_op": None,
            "solution_file": None,
            "finished_at": datetime.now(UTC).isoformat(timespec="seconds")}
@@ -311,11 +310,9 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
             note(f"resuming {config.out}: {outcome.skipped} of {len(jobs)} jobs already "
                  "recorded")
         by_key = {job.spec["key"]: job for job in todo}
-        started = time.monotonic()
         with _progress_bar(len(todo), enabled=progress) as advance:
             for spec, result in execute(config, [job.spec for job in todo]):
-                status = record_result(store, by_key[spec["key"]], result,
-                                       time.monotonic() - started)
+                status = record_result(store, by_key[spec["key"]], result)
                 outcome.ran += 1
                 if status != OK:
                     outcome.failed += 1

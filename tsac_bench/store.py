@@ -47,7 +47,6 @@ COLUMNS: dict[str, str] = {
     "lower_bound": "REAL",
     "reference": "TEXT",  # where J_star / lower_bound came from
     "runtime": "REAL",  # seconds the method planned (solve's wall time)
-    "job_time": "REAL",  # seconds the whole job took, seen from the driver
     "stats": "TEXT",  # JSON
     "versions": "TEXT",  # JSON
     "host": "TEXT",

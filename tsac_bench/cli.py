@@ -246,17 +246,23 @@ def run(
 
 
 def _print_summary(run_dir: Path) -> None:
-    from tsac_bench.report import load, summary
+    from tsac_bench.report import below_reference, load, summary
 
     frame = load(run_dir)
     if frame.empty:
         return
+    for row in below_reference(frame).itertuples():
+        say_error(f"warning: {row.key}: J = {row.J:.6f} is below the exact reference "
+                  f"(J* {row.J_star}, LB {row.lower_bound}): a bug in an exact model, the "
+                  "evaluator or the simulator, or a wrong manifest")
     table = Table("mode", "scale", "method", "jobs", "failed", "mean J", "mean gap to J*",
                   title="Summary (J: mean over instances of the mean over seeds)")
     for row in summary(frame).itertuples():
-        gap = (f"{row.gap_mean:.2%}" if row.gap_mean == row.gap_mean
+        gap = (f"{row.gap_mean:.2%}" if row.gap_n
                else f"<= {row.gap_lb_mean:.2%} (vs LB)" if row.gap_lb_mean == row.gap_lb_mean
                else "-")
+        if 0 < row.gap_n < row.instances:
+            gap += f" ({row.gap_n} of {row.instances})"
         mean = f"{row.J_mean:.3f}" if row.J_mean == row.J_mean else "-"
         table.add_row(row.mode, row.scale, row.method, str(row.jobs), str(row.failed), mean,
                       gap)

@@ -27,13 +27,18 @@ Spec = dict[str, Any]
 Result = dict[str, Any]
 
 
-def _serve(conn: Connection) -> None:
+def _serve(conn: Connection, log: str | None) -> None:
     """A worker process's loop: one job in, one result out, until the driver goes away.
 
     The worker leads its own process group, so that killing a hung job also kills the
-    processes its solver started (a CP-SAT or HiGHS helper process)."""
+    processes its solver started (a CP-SAT or HiGHS helper process). What solvers print goes
+    to ``log``, not over the driver's progress bar."""
     if hasattr(os, "setsid"):
         os.setsid()
+    if log is not None:
+        with open(log, "ab") as sink:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
     while True:
         try:
             spec = conn.recv()
@@ -45,10 +50,10 @@ def _serve(conn: Connection) -> None:
 class _Worker:
     """One long-lived worker process, so that heavy imports (torch, Pyomo) happen once."""
 
-    def __init__(self, context: Any) -> None:
+    def __init__(self, context: Any, log: str | None) -> None:
         self.conn, child = context.Pipe()
         # Not a daemon: a daemonic process may not start the solver processes some methods use.
-        self.process = context.Process(target=_serve, args=(child,))
+        self.process = context.Process(target=_serve, args=(child, log))
         self.process.start()
         child.close()
         self.spec: Spec | None = None
@@ -82,12 +87,15 @@ def _context() -> Any:
     return context
 
 
-def run_local(specs: Iterable[Spec], jobs: int) -> Iterator[tuple[Spec, Result]]:
-    """Run the jobs on ``jobs`` local worker processes."""
+def run_local(specs: Iterable[Spec], jobs: int,
+              log: str | os.PathLike[str] | None = None) -> Iterator[tuple[Spec, Result]]:
+    """Run the jobs on ``jobs`` local worker processes; their output is appended to ``log``
+    (inherited from the driver when None)."""
+    log = None if log is None else os.fspath(log)
     queue = list(specs)
     queue.reverse()  # pop() from the end keeps the given order
     context = _context()
-    workers = [_Worker(context) for _ in range(min(jobs, len(queue)))]
+    workers = [_Worker(context, log) for _ in range(min(jobs, len(queue)))]
     try:
         while True:
             for worker in workers:
@@ -107,7 +115,7 @@ def run_local(specs: Iterable[Spec], jobs: int) -> Iterator[tuple[Spec, Result]]
                     continue
                 spec, worker.spec = worker.spec, None
                 if result["status"] in ("timeout", "crash"):
-                    workers[i] = _Worker(context)
+                    workers[i] = _Worker(context, log)
                 yield spec, result
     finally:
         for worker in workers:

@@ -101,6 +101,21 @@ def per_instance(frame: pd.DataFrame) -> pd.DataFrame:
     return table
 
 
+#: Relative slack below J* or the lower bound that is put down to solver tolerances.
+REFERENCE_TOLERANCE = 1e-6
+
+
+def below_reference(frame: pd.DataFrame) -> pd.DataFrame:
+    """Jobs whose J is below their instance's J* or lower bound. MODEL.md: every executed
+    plan is a feasible offline solution, so J >= J* >= LB always; a row here is a bug in an
+    exact model, the evaluator or the simulator (or a wrong manifest)."""
+    ok = frame[frame["status"] == OK].drop(columns=["J_star", "lower_bound"])
+    ok = ok.merge(references(frame), left_on="instance", right_index=True, how="left")
+    floor = ok[["J_star", "lower_bound"]].max(axis=1)
+    below = ok["J"] < floor * (1 - REFERENCE_TOLERANCE) - 1e-9
+    return ok.loc[below, ["key", "J", "J_star", "lower_bound", "J_star_source"]]
+
+
 @dataclass(frozen=True)
 class Cell:
     """Formatting of one statistic column: the frame column, its header and precision."""
@@ -134,7 +149,8 @@ def method_table(frame: pd.DataFrame) -> pd.DataFrame:
     counts = frame.groupby(keys).agg(jobs=("status", "size"),
                                      failed=("status", lambda s: int((s != OK).sum())))
     stats = counts.join(stats, how="left").reset_index()
-    stats["instances"] = stats["instances"].fillna(0).astype(int)
+    for column in ("instances", "gap_n", "gap_lb_n"):
+        stats[column] = stats[column].fillna(0).astype(int)
     order = {s: i for i, s in enumerate(scale_order(stats["scale"]))}
     modes = {m: i for i, m in enumerate(ordered_modes(stats["mode"]))}
     stats = stats.sort_values(["mode", "scale", "method"],
@@ -146,8 +162,8 @@ def method_table(frame: pd.DataFrame) -> pd.DataFrame:
 def summary(frame: pd.DataFrame) -> pd.DataFrame:
     """The runner's end-of-run table: jobs, failures, mean J and mean gap per cell."""
     table = method_table(frame)
-    return table[["mode", "scale", "method", "jobs", "failed", "J_mean", "gap_mean",
-                  "gap_lb_mean"]]
+    return table[["mode", "scale", "method", "jobs", "failed", "instances", "J_mean",
+                  "gap_mean", "gap_n", "gap_lb_mean"]]
 
 
 class SolutionLoader:
@@ -288,7 +304,8 @@ def latex_table(table: pd.DataFrame, mode: str) -> str:
     """A booktabs table of one mode: rows grouped by scale, best values in bold."""
     rows = table[table["mode"] == mode].reset_index(drop=True)
     bold = _bold_mask(rows)
-    header = ["Scale", "Method", "$n$", *[c.latex for c in SUMMARY_CELLS], "Failed"]
+    header = ["Scale", "Method", "$n$", *[c.latex for c in SUMMARY_CELLS], "$n_{J^*}$",
+              "Failed"]
     lines = [
         r"\begin{table}[t]",
         r"\centering",
@@ -310,7 +327,7 @@ def latex_table(table: pd.DataFrame, mode: str) -> str:
         for cell in SUMMARY_CELLS:
             text = _fmt(row[cell.column], cell.digits, cell.percent)
             cells.append(rf"\textbf{{{text}}}" if bold.at[i, cell.column] else text)
-        cells.append(str(int(row["failed"])))
+        cells += [str(int(row["gap_n"])), str(int(row["failed"]))]
         lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}", ""]
     return "\n".join(lines)
@@ -325,6 +342,7 @@ def markdown_table(table: pd.DataFrame, mode: str) -> str:
         printed = rows[cell.column].map(lambda v, c=cell: _fmt(v, c.digits, c.percent))
         out[cell.markdown] = [f"**{p}**" if b else p
                               for p, b in zip(printed, bold[cell.column], strict=True)]
+    out["n with J*"] = rows["gap_n"].astype(int)
     out["failed"] = rows["failed"].astype(int)
     return _markdown(out, text_columns=2)
 
@@ -394,6 +412,12 @@ def write_report(run_dir: str | Path, out: str | Path) -> Path:
                       "per-instance J against the best method, p-values Holm-corrected.", "",
                       stats_md]
     index += _figure_section(frame, instances, run_dir, out)
+    below = below_reference(frame)
+    if not below.empty:
+        index += ["## Costs below the exact reference (a bug: J >= J* >= LB must hold)", ""]
+        index += [f"- `{r.key}`: J = {r.J:.6f}, J* = {r.J_star}, LB = {r.lower_bound}"
+                  for r in below.itertuples()]
+        index.append("")
     failures = frame[frame["status"] != OK]
     if not failures.empty:
         index += ["## Failed jobs", "", f"{len(failures)} job(s) did not produce a solution:",

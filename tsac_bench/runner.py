@@ -42,6 +42,8 @@ def default_time_limit(method: str, n_tasks: int) -> float:
     return per_ten * max(1.0, n_tasks / 10)
 MODE_CHOICES = ("auto", "static", "dynamic", "both")
 MANIFEST_NAME = "manifest.json"
+#: What the local worker processes print (solver logs, warnings), in the run directory.
+WORKER_LOG = "workers.log"
 MANIFEST_FORMAT = "tsac-bench/manifest@1"
 #: Statuses of a job that produced a scored solution; anything else is a failure.
 OK = "ok"
@@ -273,7 +275,7 @@ def execute(config: RunConfig, specs: list[dict[str, Any]]) -> Iterator[tuple[di
     if config.executor == "local":
         if config.scheduler is not None:
             raise TsacBenchError("--scheduler needs --executor dask")
-        return run_local(specs, config.jobs)
+        return run_local(specs, config.jobs, log=config.out / WORKER_LOG)
     if config.executor == "dask":
         return run_dask(specs, config.jobs, config.scheduler)
     raise TsacBenchError(f"--executor: expected local or dask, got {config.executor!r}")

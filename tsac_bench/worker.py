@@ -76,7 +76,8 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     except TsacBenchError as exc:
         return failure("error", str(exc))
     except Exception as exc:  # a plug-in may raise anything; the batch must go on
-        return failure("error", f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        text = f"{type(exc).__name__}: {exc}"
+        return failure("error", text.splitlines()[0], traceback.format_exc())
     return {"status": "ok", "message": "", "detail": "",
             "solution": solution_to_dict(solution, instance), "J": evaluation.J,
             "terms": dict(evaluation.terms), "runtime": outcome.wall_time,

@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from tsac_bench.report import (
+    below_reference,
     comparisons,
     holm,
     latex_table,
@@ -118,7 +119,7 @@ def test_latex_table_numbers_equal_a_pandas_computation_from_the_store(run_dir, 
                                             strict=True)]
     expected = per_seed_mean.groupby(["scale", "method"]).agg(
         n=("J", "size"), mean=("J", "mean"), std=("J", "std"), median=("J", "median"),
-        gap=("gap", "mean"))
+        gap=("gap", "mean"), with_j_star=("gap", "count"))
     failed = frame.groupby(["scale", "method"])["status"].apply(lambda s: (s != "ok").sum())
 
     def plain(cell):
@@ -133,7 +134,8 @@ def test_latex_table_numbers_equal_a_pandas_computation_from_the_store(run_dir, 
         assert float(plain(cells[4])) == pytest.approx(e["std"], abs=0.005)
         assert float(plain(cells[5])) == pytest.approx(e["median"], abs=0.005)
         assert float(plain(cells[6])) == pytest.approx(100 * e["gap"], abs=0.005)
-        assert int(cells[7]) == failed[(cells[0], cells[1])]
+        assert int(cells[7]) == e["with_j_star"]
+        assert int(cells[8]) == failed[(cells[0], cells[1])]
     bold = {(r[0], r[1], i) for r in rows for i, c in enumerate(r) if c.startswith(r"\textbf")}
     # 2/4: B has the lower mean and median J, A the lower gap; 3/6: exact is best everywhere.
     assert bold == {("2/4", "B", 3), ("2/4", "B", 5), ("2/4", "A", 6),
@@ -145,7 +147,7 @@ def test_latex_table_numbers_equal_a_pandas_computation_from_the_store(run_dir, 
 def test_latex_escapes_method_names():
     table = pd.DataFrame([{"mode": "static", "scale": "2/4", "method": "my_method&co",
                            "instances": 1, "failed": 0, "J_mean": 1.0, "J_std": np.nan,
-                           "J_median": 1.0, "gap_mean": np.nan}])
+                           "J_median": 1.0, "gap_mean": np.nan, "gap_n": 0}])
     assert r"my\_method\&co" in latex_table(table, "static")
 
 
@@ -175,3 +177,15 @@ def test_per_instance_averages_seeds_before_instances(run_dir):
     assert table.at[("i1", "A"), "J"] == 120.0 and table.at[("i1", "A"), "seeds"] == 2
     assert table.at[("i3", "B"), "J"] == 85.0 and table.at[("i3", "B"), "seeds"] == 1
     assert table.at[("i1", "A"), "gap"] == pytest.approx(0.2, rel=1e-12)
+
+
+def test_a_cost_below_the_exact_reference_is_flagged(run_dir, tmp_path):
+    with ResultStore(run_dir) as store:
+        assert below_reference(store.frame()).empty
+        record(store, "i1", "2/4", "C", 0, 99.0)  # below i1's J* = 100 (manifest)
+        record(store, "i4", "3/6", "C", 0, 59.0)  # below i4's bound 60 (an exact run's stats)
+        record(store, "i2", "2/4", "C", 0, 50.0 * (1 - 1e-7))  # within solver tolerance
+        flagged = below_reference(store.frame())
+    assert sorted(flagged["key"]) == ["i1|C|static|0", "i4|C|static|0"]
+    index = write_report(run_dir, tmp_path / "report").read_text()
+    assert "- `i1|C|static|0`: J = 99.000000, J* = 100.0, LB = nan" in index

@@ -207,10 +207,12 @@ def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[fl
                  title: str) -> Any:
     """Top: one lane per AAV, a bar per leg (flight solid, waiting for the window hatched),
     labelled with the node it reaches. Bottom (when the run has re-plans): its cost curve."""
-    times, costs, label = curve
     from tsac_bench.evaluator import CostEvaluator
 
+    times, costs, cost_label = curve
     evaluator = CostEvaluator(instance)
+    traces = [evaluator.trace(n, route) for n, route in enumerate(solution.routes)]
+    end = max((t.arrivals[-1] for t in traces if t.arrivals), default=1.0)
     lanes = 2 if times else 1
     fig, axes = plt.subplots(lanes, 1, figsize=(9, 1.0 + 0.55 * instance.n_aavs + 2.2 *
                                                 (lanes - 1)), squeeze=False, sharex=True,
@@ -218,11 +220,9 @@ def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[fl
     ax = axes[0][0]
     colours = plt.get_cmap("tab20")
     ids = instance.node_ids
-    end = 0.0
-    for n, route in enumerate(solution.routes):
-        trace = evaluator.trace(n, route)
+    for n, trace in enumerate(traces):
         prev, clock = instance.start_node(n), 0.0
-        for visit, arrival in zip(route, trace.arrivals, strict=True):
+        for visit, arrival in zip(trace.route, trace.arrivals, strict=True):
             flight = instance.dist[prev][visit.node] / instance.aavs[n].speed
             depot = instance.is_depot(visit.node)
             colour = "0.6" if depot else colours(visit.node % 20)
@@ -230,10 +230,10 @@ def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[fl
             if arrival > clock + flight:
                 ax.barh(n, arrival - clock - flight, left=clock + flight, height=0.6,
                         color="none", edgecolor=colour, hatch="///", lw=0.3)
-            label = ids[visit.node] if depot else f"{ids[visit.node]}:{visit.amount}"
-            ax.text(clock + flight / 2, n, label, ha="center", va="center", fontsize=6)
+            if flight >= end / 40:  # no label on a sliver (a start at the depot)
+                text = ids[visit.node] if depot else f"{ids[visit.node]}:{visit.amount}"
+                ax.text(clock + flight / 2, n, text, ha="center", va="center", fontsize=6)
             prev, clock = visit.node, arrival
-        end = max(end, clock)
     ax.set_yticks(range(instance.n_aavs), [a.id for a in instance.aavs])
     ax.invert_yaxis()
     ax.set_title(title)
@@ -246,7 +246,7 @@ def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[fl
         costs = [*costs, costs[-1]]
         cost_ax = axes[1][0]
         cost_ax.step(times, costs, where="post", marker="o")
-        cost_ax.set_ylabel(label)
+        cost_ax.set_ylabel(cost_label)
         cost_ax.grid(alpha=0.3)
     axes[-1][0].set_xlabel("time (s); dashed: task releases")
     fig.tight_layout()

@@ -110,3 +110,22 @@ def test_the_replan_curve_jumps_at_releases_and_drops_with_the_replan():
     assert replan_curve(plain) == ([0.0, 90.0], [300.0, 150.0], "J after re-plan")
     assert replan_curve({}) == ([], [], "J after re-plan")
     assert replan_curve({"replans": [{"J": 1.0}]}) == ([], [], "")
+
+
+def test_gantt_lanes_and_cost_panel():
+    from tsac_bench.figures import gantt_figure, replan_curve
+
+    instance = read_instance(HAND)
+    solution = read_solution(HAND_SOLUTION, instance)
+    stats = {"replans": [{"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
+                         {"time": 90.0, "J": 150.0, "J_known": 40.0, "J_known_before": 130.0}]}
+    fig = gantt_figure(instance, solution, replan_curve(stats), "hand")
+    gantt, cost = fig.axes
+    assert cost.get_ylabel() == "J of the released tasks"
+    # A0 flies 2 legs, A1 5; A1 waits for T1's window (hatched): 8 bars in all.
+    assert len(gantt.patches) == 2 + 5 + 1
+    labels = sorted(t.get_text() for t in gantt.texts)
+    # Four depot visits, but A1 starts at D0: its first leg is a sliver, left unlabelled.
+    assert labels == ["D0", "D0", "D0", "T0:5", "T1:10", "T3:10"]
+    times, costs = cost.lines[0].get_data()
+    assert list(costs) == [20.0, 130.0, 40.0, 40.0] and list(times)[:3] == [0.0, 90.0, 90.0]

@@ -1,0 +1,131 @@
+"""Figures from a store whose solutions are real files on tests/data/hand.json."""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.io import read_instance, read_solution, write_solution
+from tsac_bench.model import Solution
+from tsac_bench.report import coalition_sizes, write_report
+from tsac_bench.store import ResultStore, job_key
+
+pytest.importorskip("matplotlib")
+
+HAND = Path(__file__).parent.parent / "data" / "hand.json"
+HAND_SOLUTION = HAND.parent / "hand-solution.json"
+
+
+@pytest.fixture
+def run_dir(tmp_path) -> Path:
+    """Method "a" is hand-solution.json (one AAV per task); method "b" sends both AAVs to
+    T1 (20 kg delivery, 10 kg each). Both in both modes; the dynamic runs carry re-plans."""
+    instance = read_instance(HAND)
+    solutions = {
+        "a": read_solution(HAND_SOLUTION, instance),
+        "b": Solution.from_ids(instance, {"A0": ["D0", ("T1", 10), "D0"],
+                                          "A1": ["D0", ("T1", 10), "D0"]}),
+    }
+    run = tmp_path / "run"
+    with ResultStore(run) as store:
+        for method, solution in solutions.items():
+            evaluation = CostEvaluator(instance).evaluate(solution)
+            for mode in ("static", "dynamic"):
+                relative = store.solution_path("data", "hand", method, mode, 0)
+                write_solution(solution, instance, run / relative)
+                replans = [{"time": 0.0, "J": 300.0, "J_known": 100.0, "J_known_before": None},
+                           {"time": 250.0, "J": evaluation.J, "J_known": evaluation.J,
+                            "J_known_before": 290.0}]
+                store.record({
+                    "key": job_key("hand", method, mode, 0), "instance": "hand",
+                    "instance_set": "data", "instance_file": str(HAND), "scale": "2/4",
+                    "method": method, "mode": mode, "seed": 0, "status": "ok",
+                    "J": evaluation.J, "J_load": evaluation.terms["load"],
+                    "J_time": evaluation.terms["time"], "J_op": evaluation.terms["op"],
+                    "solution_file": str(relative), "host": "test", "versions": {},
+                    "stats": {"replans": replans} if mode == "dynamic" else {}})
+    return run
+
+
+def test_coalition_sizes_come_from_the_stored_solutions(run_dir):
+    with ResultStore(run_dir) as store:
+        data = coalition_sizes(store.frame(), run_dir)
+    static = data[data["mode"] == "static"].sort_values(["method", "task"])
+    assert list(static[["method", "task", "demand", "coalition_size"]].itertuples(
+        index=False, name=None)) == [("a", "T0", 10, 1), ("a", "T1", 20, 1),
+                                     ("a", "T3", 10, 1), ("b", "T1", 20, 2)]
+
+
+def test_the_report_draws_every_figure_as_png_and_pdf(run_dir, tmp_path):
+    out = tmp_path / "report"
+    index = write_report(run_dir, out).read_text()
+    names = ["boxplot-J-static", "boxplot-J-dynamic", "profile-static", "profile-dynamic",
+             "coalitions-static", "coalitions-dynamic", "gantt-hand-a", "gantt-hand-b",
+             "routes-hand"]
+    for name in names:
+        for suffix in (".png", ".pdf"):
+            path = out / "figures" / (name + suffix)
+            assert path.stat().st_size > 1000, path
+        assert f"figures/{name}.png" in index
+    assert "only the visits are drawn" not in index  # the re-plans were used
+    assert "## Static mode" in index and "## Dynamic mode" in index
+    per_instance = pd.read_csv(out / "tables" / "per_instance.csv")
+    assert sorted(per_instance["J"].round(6)) == sorted(
+        [212.821528, 212.821528, *[np.round(_b_cost(), 6)] * 2])
+
+
+def test_gantt_without_replans_is_drawn_with_a_note(run_dir, tmp_path):
+    with ResultStore(run_dir) as store:
+        for row in store.rows():
+            if row["mode"] == "dynamic":
+                store.record({**row, "stats": {}})
+    from tsac_bench.figures import dynamic_gantt
+    from tsac_bench.report import SolutionLoader
+
+    with ResultStore(run_dir) as store:
+        frame = store.frame()
+    _, paths, note = dynamic_gantt(frame, SolutionLoader(run_dir), tmp_path / "figures")
+    assert "only the visits are drawn" in note
+    assert [p.name for p in paths] == ["gantt-hand-a.png", "gantt-hand-b.png"]
+    assert (tmp_path / "figures" / "gantt-hand-a.pdf").exists()
+
+
+def _b_cost() -> float:
+    instance = read_instance(HAND)
+    return CostEvaluator(instance).cost(Solution.from_ids(
+        instance, {"A0": ["D0", ("T1", 10), "D0"], "A1": ["D0", ("T1", 10), "D0"]}))
+
+
+def test_the_replan_curve_jumps_at_releases_and_drops_with_the_replan():
+    from tsac_bench.figures import replan_curve
+
+    stats = {"replans": [
+        {"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
+        {"time": 90.0, "J": 150.0, "J_known": 40.0, "J_known_before": 130.0}]}
+    assert replan_curve(stats) == ([0.0, 90.0, 90.0], [20.0, 130.0, 40.0],
+                                   "J of the released tasks")
+    plain = {"replans": [{"time": 0.0, "J": 300.0}, {"time": 90.0, "J": 150.0}]}
+    assert replan_curve(plain) == ([0.0, 90.0], [300.0, 150.0], "J after re-plan")
+    assert replan_curve({}) == ([], [], "J after re-plan")
+    assert replan_curve({"replans": [{"J": 1.0}]}) == ([], [], "")
+
+
+def test_gantt_lanes_and_cost_panel():
+    from tsac_bench.figures import gantt_figure, replan_curve
+
+    instance = read_instance(HAND)
+    solution = read_solution(HAND_SOLUTION, instance)
+    stats = {"replans": [{"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
+                         {"time": 90.0, "J": 150.0, "J_known": 40.0, "J_known_before": 130.0}]}
+    fig = gantt_figure(instance, solution, replan_curve(stats), "hand")
+    gantt, cost = fig.axes
+    assert cost.get_ylabel() == "J of the released tasks"
+    # A0 flies 2 legs, A1 5; A1 waits for T1's window (hatched): 8 bars in all.
+    assert len(gantt.patches) == 2 + 5 + 1
+    labels = sorted(t.get_text() for t in gantt.texts)
+    # Four depot visits, but A1 starts at D0: its first leg is a sliver, left unlabelled.
+    assert labels == ["D0", "D0", "D0", "T0:5", "T1:10", "T3:10"]
+    times, costs = cost.lines[0].get_data()
+    assert list(costs) == [20.0, 130.0, 40.0, 40.0] and list(times)[:3] == [0.0, 90.0, 90.0]

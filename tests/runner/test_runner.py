@@ -1,0 +1,199 @@
+import json
+import os
+import shutil
+import signal
+import sqlite3
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from tsac_bench.errors import UnknownMethodError
+from tsac_bench.io import read_instance, read_solution
+from tsac_bench.report import per_instance
+from tsac_bench.runner import RunConfig, run_batch
+from tsac_bench.solve import solve
+from tsac_bench.store import ResultStore, export
+from tsac_bench.worker import execute_job
+
+COMPARED = ["key", "instance", "scale", "method", "mode", "seed", "status", "J", "J_load",
+            "J_time", "J_op", "solution_file"]
+
+
+def rows_by_key(run_dir: Path) -> dict[str, dict]:
+    with ResultStore(run_dir, create=False) as store:
+        return {row["key"]: row for row in store.rows()}
+
+
+def count_rows(db: Path) -> int:
+    if not db.exists():
+        return 0
+    try:
+        with sqlite3.connect(db, timeout=5) as conn:
+            return conn.execute("SELECT count(*) FROM jobs").fetchone()[0]
+    except sqlite3.OperationalError:  # the table is not created yet
+        return 0
+
+
+def summary_lines(stdout: str) -> list[str]:
+    """The summary table printed at the end of a run (without the counts line after it)."""
+    return [line for line in stdout.splitlines() if "│" in line or "┃" in line]
+
+
+def test_a_killed_run_resumes_and_ends_like_an_uninterrupted_one(tmp_path, two_instances,
+                                                                 plugin_path, cli):
+    args = ["run", two_instances, "--methods", "greedy,slow", "--seeds", "3", "--jobs", "1",
+            "--no-report", "--no-progress"]
+    killed = tmp_path / "killed"
+    process = cli(*args, "--out", killed, plugins=plugin_path, background=True)
+    deadline = time.monotonic() + 60
+    while count_rows(killed / "results.sqlite") < 3 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    partial = rows_by_key(killed)
+    assert 3 <= len(partial) < 12, "the kill must land in the middle of the run"
+
+    resumed = cli(*args, "--out", killed, plugins=plugin_path)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"{len(partial)} of 12 jobs already recorded" in resumed.stderr
+    assert f"{12 - len(partial)} job(s) run, {len(partial)} already recorded" in resumed.stdout
+    after = rows_by_key(killed)
+    assert len(after) == 12
+    for key, row in partial.items():  # finished jobs were skipped, not run again
+        assert after[key]["finished_at"] == row["finished_at"]
+        assert after[key]["J"] == row["J"]
+
+    full = cli(*args, "--out", tmp_path / "full", plugins=plugin_path)
+    assert full.returncode == 0, full.stderr
+    uninterrupted = rows_by_key(tmp_path / "full")
+    assert [{c: r[c] for c in COMPARED} for r in after.values()] == \
+        [{c: r[c] for c in COMPARED} for r in uninterrupted.values()]
+    assert summary_lines(resumed.stdout) == summary_lines(full.stdout)
+    assert len(summary_lines(full.stdout)) == 3 + 2  # header lines + one row per scale
+    for row in after.values():
+        assert row["status"] == "ok"
+        stored = json.loads((killed / row["solution_file"]).read_text())
+        assert stored == json.loads((tmp_path / "full" / row["solution_file"]).read_text())
+
+
+def test_raising_crashing_and_hanging_plugins_are_recorded_and_the_batch_goes_on(
+        tmp_path, two_instances, plugin_path, cli):
+    out = tmp_path / "run"
+    result = cli("run", two_instances, "--methods", "greedy,boom,abort,hang", "--jobs", "2",
+                 "--time-limit", "0.2", "--grace", "1", "--no-report", "--no-progress",
+                 "--out", out, plugins=plugin_path)
+    assert result.returncode == 0, result.stderr
+    rows = rows_by_key(out)
+    assert len(rows) == 8
+    by_method: dict[str, list[dict]] = {}
+    for row in rows.values():
+        by_method.setdefault(row["method"], []).append(row)
+    assert {r["status"] for r in by_method["boom"]} == {"error"}
+    assert all(r["message"] == "RuntimeError: boom on purpose" for r in by_method["boom"])
+    assert all("Traceback" in r["detail"] for r in by_method["boom"])
+    assert {r["status"] for r in by_method["abort"]} == {"crash"}
+    assert all("exited with code 3" in r["message"] for r in by_method["abort"])
+    assert {r["status"] for r in by_method["hang"]} == {"timeout"}
+    assert all(r["J"] is None and r["solution_file"] is None
+               for m in ("boom", "abort", "hang") for r in by_method[m])
+    for row in by_method["greedy"]:
+        assert row["status"] == "ok"
+        instance = read_instance(row["instance_file"])
+        assert row["J"] == solve(instance, "greedy", time_limit=0.2).cost
+        assert row["J"] == pytest.approx(row["J_load"] + row["J_time"] + row["J_op"], rel=1e-12)
+        assert read_solution(out / row["solution_file"], instance).cost == row["J"]
+    assert "boom on purpose" in result.stderr
+    assert "8 job(s) run, 0 already recorded, 6 failed" in result.stdout
+
+
+def test_a_malformed_instance_is_reported_and_the_others_run(tmp_path, two_instances, cli):
+    bad = Path(__file__).parent.parent / "data" / "bad" / "missing-field.json"
+    shutil.copy(bad, two_instances / "broken.json")
+    out = tmp_path / "run"
+    result = cli("run", two_instances, "--methods", "greedy", "--no-report", "--no-progress",
+                 "--out", out)
+    assert result.returncode == 2
+    problems = [line for line in result.stderr.splitlines() if "broken.json" in line]
+    assert problems == [f"{two_instances / 'broken.json'}: tasks[3].t_end: Field required"]
+    assert sorted(r["instance"] for r in rows_by_key(out).values()) == ["quick-2-4-s1",
+                                                                        "quick-2-5-s2"]
+
+
+def test_an_unknown_method_is_one_line_and_runs_nothing(tmp_path, two_instances, cli):
+    result = cli("run", two_instances, "--methods", "greedy,nope", "--out", tmp_path / "run")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1].startswith("error: unknown method 'nope'")
+    assert not (tmp_path / "run" / "results.sqlite").exists()
+    with pytest.raises(UnknownMethodError):
+        run_batch(RunConfig([two_instances], tmp_path / "x", methods=["nope"]))
+
+
+def test_an_unknown_mode_is_a_recorded_error(two_instances):
+    instance = read_instance(two_instances / "quick-2-4-s1.json")
+    from tsac_bench.io import instance_to_dict
+
+    result = execute_job({"instance": instance_to_dict(instance), "method": "greedy",
+                          "mode": "sideways", "seed": 0, "time_limit": 1})
+    assert result["status"] == "error" and "unknown mode 'sideways'" in result["message"]
+
+
+def test_manifest_references_give_gaps(tmp_path, two_instances):
+    greedy = {p.stem: solve(read_instance(p), "greedy").cost
+              for p in sorted(two_instances.glob("*.json"))}
+    manifest = {"format": "tsac-bench/manifest@1", "instances": {
+        "quick-2-4-s1": {"file": "quick-2-4-s1.json", "J_star": greedy["quick-2-4-s1"] / 1.25,
+                         "lower_bound": 1.0, "status": "optimal"},
+        "quick-2-5-s2": {"file": "quick-2-5-s2.json", "J_star": None,
+                         "lower_bound": greedy["quick-2-5-s2"] / 2, "status": "feasible"}}}
+    (two_instances / "manifest.json").write_text(json.dumps(manifest))
+    out = tmp_path / "run"
+    outcome = run_batch(RunConfig([two_instances], out, methods=["greedy"], mode="static",
+                                  seeds=2, jobs=2), note=lambda line: None, progress=False)
+    assert (outcome.total, outcome.ran, outcome.failed, outcome.problems) == (4, 4, 0, [])
+    with ResultStore(out) as store:
+        frame = store.frame()
+    assert set(frame["reference"]) == {"manifest"}
+    table = per_instance(frame).set_index("instance")
+    assert table.at["quick-2-4-s1", "gap"] == pytest.approx(0.25, rel=1e-12)
+    assert pd.isna(table.at["quick-2-5-s2", "gap"])
+    assert table.at["quick-2-5-s2", "gap_lb"] == pytest.approx(1.0, rel=1e-12)
+    assert table.at["quick-2-4-s1", "seeds"] == 2
+
+
+def test_a_malformed_manifest_is_reported_and_the_run_goes_on(tmp_path, two_instances):
+    (two_instances / "manifest.json").write_text(json.dumps(
+        {"format": "tsac-bench/manifest@1",
+         "instances": {"quick-2-4-s1": {"J_star": "12"}}}))
+    notes: list[str] = []
+    outcome = run_batch(RunConfig([two_instances], tmp_path / "run", methods=["greedy"],
+                                  mode="static", jobs=1), note=notes.append, progress=False)
+    assert outcome.problems == [f"{two_instances / 'manifest.json'}: "
+                                "instances.quick-2-4-s1.J_star: expected a number or null, "
+                                "got '12'"]
+    assert outcome.ran == 2 and outcome.failed == 0
+
+
+def test_export_csv_and_parquet_hold_every_row(tmp_path, two_instances):
+    out = tmp_path / "run"
+    run_batch(RunConfig([two_instances], out, methods=["greedy"], mode="static", seeds=2,
+                        jobs=1), note=lambda line: None, progress=False)
+    assert export(out, "csv", tmp_path / "r.csv") == 4
+    assert export(out, "parquet", tmp_path / "r.parquet") == 4
+    csv = pd.read_csv(tmp_path / "r.csv").sort_values("key").reset_index(drop=True)
+    parquet = pd.read_parquet(tmp_path / "r.parquet").sort_values("key").reset_index(drop=True)
+    stored = rows_by_key(out)
+    assert list(csv["key"]) == sorted(stored)
+    assert list(parquet["J"]) == [stored[k]["J"] for k in sorted(stored)]
+    assert list(csv["J"]) == pytest.approx(list(parquet["J"]), rel=1e-15)
+    assert json.loads(parquet["versions"][0])["tsac-bench"]
+
+
+def test_default_time_limits_grow_with_the_task_count():
+    from tsac_bench.runner import default_time_limit
+
+    assert default_time_limit("greedy", 4) == 2.0
+    assert default_time_limit("greedy", 80) == 16.0
+    assert default_time_limit("exact", 10) == 10.0
+    assert default_time_limit("exact-cpsat", 40) == 40.0

@@ -199,3 +199,16 @@ def test_unknown_mode_is_a_user_error():
 
     with pytest.raises(TsacBenchError, match="unknown mode 'online'"):
         solve(line(50), "greedy", mode="online")
+
+
+def test_replan_seeds_are_derived_and_fit_a_signed_32_bit_int():
+    seeds = []
+
+    class SeedRecorder(GreedyAllocator):
+        def plan(self, state, *, seed=0, time_limit=None):
+            seeds.append(seed)
+            return super().plan(state, seed=seed, time_limit=time_limit)
+
+    simulate(generate("4/10", 5), SeedRecorder(), seed=7)
+    assert seeds[0] == 7 and len(seeds) == 3  # t = 0 and the generator's two events
+    assert len(set(seeds)) == 3 and all(0 <= s < 2**31 for s in seeds)

@@ -165,9 +165,10 @@ def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
             state = PlanningState(instance, t, visible, prefixes, plan.result.routes)
         before = None if plan is None else known_cost(plan.evaluation, t)
         # The first call gets the run's seed itself, so a run without events is exactly
-        # the static plan call; later calls get independent seeds derived from it.
+        # the static plan call; later calls get independent seeds derived from it, kept below
+        # 2**31 because some solvers (CP-SAT) take only a signed 32-bit seed.
         plan_seed = seed if i == 0 else int(np.random.SeedSequence([seed, i])
-                                            .generate_state(1)[0])
+                                            .generate_state(1)[0] >> 1)
         plan = checked_plan(allocator, state, seed=plan_seed, time_limit=time_limit)
         total_wall += plan.wall_time
         assert plan.evaluation.J is not None

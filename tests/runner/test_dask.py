@@ -43,7 +43,8 @@ def test_on_dask_a_hung_or_crashing_job_is_recorded_too(tmp_path, two_instances,
                                                         cli):
     (two_instances / "quick-2-5-s2.json").unlink()
     out = tmp_path / "run"
-    result = cli("run", two_instances, "--methods", "greedy,boom,abort,hang", "--jobs", "2",
+    result = cli("run", two_instances, "--methods", "greedy,boom,abort,hang", "--mode", "static",
+                 "--jobs", "2",
                  "--executor", "dask", "--time-limit", "0.2", "--grace", "1", "--no-report",
                  "--no-progress", "--out", out, plugins=plugin_path)
     assert result.returncode == 0, result.stderr

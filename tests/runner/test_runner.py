@@ -43,7 +43,8 @@ def summary_lines(stdout: str) -> list[str]:
 
 def test_a_killed_run_resumes_and_ends_like_an_uninterrupted_one(tmp_path, two_instances,
                                                                  plugin_path, cli):
-    args = ["run", two_instances, "--methods", "greedy,slow", "--seeds", "3", "--jobs", "1",
+    args = ["run", two_instances, "--methods", "greedy,slow", "--mode", "static", "--seeds", "3",
+            "--jobs", "1",
             "--no-report", "--no-progress"]
     killed = tmp_path / "killed"
     process = cli(*args, "--out", killed, plugins=plugin_path, background=True)
@@ -81,7 +82,8 @@ def test_a_killed_run_resumes_and_ends_like_an_uninterrupted_one(tmp_path, two_i
 def test_raising_crashing_and_hanging_plugins_are_recorded_and_the_batch_goes_on(
         tmp_path, two_instances, plugin_path, cli):
     out = tmp_path / "run"
-    result = cli("run", two_instances, "--methods", "greedy,boom,abort,hang", "--jobs", "2",
+    result = cli("run", two_instances, "--methods", "greedy,boom,abort,hang", "--mode", "static",
+                 "--jobs", "2",
                  "--time-limit", "0.2", "--grace", "1", "--no-report", "--no-progress",
                  "--out", out, plugins=plugin_path)
     assert result.returncode == 0, result.stderr
@@ -112,7 +114,8 @@ def test_a_malformed_instance_is_reported_and_the_others_run(tmp_path, two_insta
     bad = Path(__file__).parent.parent / "data" / "bad" / "missing-field.json"
     shutil.copy(bad, two_instances / "broken.json")
     out = tmp_path / "run"
-    result = cli("run", two_instances, "--methods", "greedy", "--no-report", "--no-progress",
+    result = cli("run", two_instances, "--methods", "greedy", "--mode", "static", "--no-report",
+                 "--no-progress",
                  "--out", out)
     assert result.returncode == 2
     problems = [line for line in result.stderr.splitlines() if "broken.json" in line]

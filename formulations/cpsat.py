@@ -343,11 +343,6 @@ def solve_cpsat_isolated(instance: Instance, tasks: Sequence[int] | None = None,
     if _POOL is None:
         _POOL = ProcessPoolExecutor(max_workers=1,
                                     mp_context=multiprocessing.get_context("spawn"))
-    if kwargs.get("hint_routes") is not None:
-        kwargs["hint_routes"] = tuple(tuple(tuple(v) for v in r) for r in kwargs["hint_routes"])
     future = _POOL.submit(_worker_solve, instance_to_dict(instance),
                           None if tasks is None else list(tasks), kwargs)
-    outcome = future.result()
-    routes = None if outcome.routes is None else tuple(
-        tuple(Visit(*v) for v in r) for r in outcome.routes)
-    return CpsatOutcome(routes, outcome.stats)
+    return future.result()

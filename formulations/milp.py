@@ -102,8 +102,11 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
     def cap(n: int) -> int:
         return instance.aavs[n].capacity
 
+    committed_amount = {(n, j): a for n, p in enumerate(prefixes) for _, j, _, a in p.steps}
+
     def upper_amount(n: int, j: int) -> int:
-        return min(cap(n), instance.tasks[j].demand)
+        # A committed amount may exceed the demand (wasteful, legal); it is fixed as flown.
+        return max(min(cap(n), instance.tasks[j].demand), committed_amount.get((n, j), 0))
 
     model.x = pyo.Var(model.A, domain=pyo.Binary)  # arc flown
     model.end = pyo.Var(model.E, domain=pyo.Binary)  # route closes after node (START: unused)
@@ -140,8 +143,20 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
         return sum(m.a[n, j] for n, net in enumerate(networks) if j in net.earliest
                    and (n, j) not in late)
 
-    model.demand = pyo.Constraint(model.T, rule=lambda m, j: pyo.Constraint.Skip if isinstance(
-        on_time_amount(m, j), int) else on_time_amount(m, j) <= instance.tasks[j].demand)
+    # covered <= on-time goods and <= demand: C_load = 1 - covered / R (Eq. 5's max(0, .)).
+    model.covered = pyo.Var(model.T, bounds=lambda m, j: (0, instance.tasks[j].demand))
+    model.coverage = pyo.Constraint(model.T, rule=lambda m, j: m.covered[j]
+                                    <= on_time_amount(m, j))
+
+    # Canonical solutions bring no more than the demand (unless a committed visit did).
+    def demand_rule(m: Any, j: int) -> Any:
+        amount = on_time_amount(m, j)
+        if isinstance(amount, int):
+            return pyo.Constraint.Skip
+        fixed = sum(a for (n, i), a in committed_amount.items() if i == j and (n, j) not in late)
+        return amount <= max(instance.tasks[j].demand, fixed)
+
+    model.demand = pyo.Constraint(model.T, rule=demand_rule)
 
     # --- time (Eq. 7): t_j >= t_i + travel on the arc flown; windows are the bounds --------
     pairs: dict[tuple[int, int, int], list] = {}
@@ -305,7 +320,7 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
     # --- objective (Eqs. 1, 4-6, 8, 9) ----------------------------------------------------
     def task_cost(m: Any, j: int) -> Any:
         task = instance.tasks[j]
-        load = 1 - on_time_amount(m, j) / task.demand
+        load = 1 - m.covered[j] / task.demand
         tardiness = 1 - m.u[j] + (m.Tm[j] - task.t_start) / horizon
         op = sum(op_cost[n, j] for n, net in enumerate(networks) if j in net.earliest)
         return w1 * load + w2 * tardiness + w3 * op
@@ -364,7 +379,8 @@ def warm_start(model: Any, routes: Sequence[Route]) -> None:
         if not var.fixed:
             var.set_value(max(0.0, var.lb if var.lb is not None else 0.0))
     for j in data.tasks:
-        model.u[j].set_value(0) if not model.u[j].fixed else None
+        if not model.u[j].fixed:
+            model.u[j].set_value(0)
         if not model.Tm[j].fixed:
             model.Tm[j].set_value(instance.tasks[j].t_start)
     for n, net in enumerate(data.networks):
@@ -406,6 +422,10 @@ def warm_start(model: Any, routes: Sequence[Route]) -> None:
                                                if not instance.is_depot(w.node)))
             tail, mode, last = j, DIRECT, j
         model.end[n, last].set_value(1)
+    for j in data.tasks:
+        on_time = sum(model.a[n, j].value for n, net in enumerate(data.networks)
+                      if j in net.earliest and (n, j) not in data.late)
+        model.covered[j].set_value(min(on_time, instance.tasks[j].demand))
 
 
 def _var_type() -> Any:

@@ -103,6 +103,8 @@ class Settings:
 #: Built-in methods by name, as "module:Class" so that listing them imports nothing heavy.
 BUILTIN_METHODS: dict[str, str] = {
     "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
+    "exact": "tsac_bench.solvers.exact:ExactAllocator",
+    "exact-cpsat": "tsac_bench.solvers.exact:CpSatAllocator",
 }
 
 _registered: dict[str, Callable[..., Allocator]] = {}

@@ -13,13 +13,13 @@ C_op are linear in the variables at every integer point.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.formulations.network import (
     DIRECT,
     START,
@@ -33,6 +33,8 @@ from tsac_bench.formulations.network import (
     parse_prefix,
     prefix_arrivals,
 )
+
+from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.model import Instance, Route, Visit
 
 
@@ -312,7 +314,7 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
     if options.symmetry:
         sym = []
         for group in identical_groups(instance, committed):
-            sym += list(zip(group, group[1:], strict=False))
+            sym += list(itertools.pairwise(group))
         rows = [(n, n2, j) for n, n2 in sym for j in networks[n2].tasks]
         model.symmetry = pyo.Constraint(rows, rule=lambda m, n, n2, j: m.y[n2, j] <= sum(
             m.y[n, i] for i in networks[n].tasks if i <= j))
@@ -526,7 +528,7 @@ def solve_milp(model: Any, *, time_limit: float | None = None, threads: int = 1,
     try:
         highspy.Highs.resetGlobalScheduler(True)
         results = opt.solve(model)
-    except Exception as exc:  # noqa: BLE001 - a backend failure is a result, not a crash
+    except Exception as exc:
         return SolveReport("error", None, None, None, "highs", version, threads, seed,
                            time.perf_counter() - began, f"{type(exc).__name__}: {exc}", False)
     wall = time.perf_counter() - began

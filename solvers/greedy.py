@@ -12,10 +12,39 @@ It is the warm start of the exact solvers and the floor every other method must 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 
 from tsac_bench.allocator import PlanningState, PlanResult, Settings
-from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.evaluator import CostEvaluator, PlanState
 from tsac_bench.insertion import best_insertion
+
+
+def insert_cheapest(plan: PlanState, state: PlanningState, tasks: Iterable[int],
+                    deadline: float | None = None) -> tuple[int, str]:
+    """For each task in turn, apply the cheapest insertion of its residual demand while one
+    lowers J. Returns the number of insertions and why it stopped ("done" or "time-limit")."""
+    n_aavs = state.instance.n_aavs
+    insertions = 0
+    for task in tasks:
+        while True:
+            if deadline is not None and time.perf_counter() > deadline:
+                return insertions, "time-limit"
+            best = None
+            for n in range(n_aavs):
+                proposal = best_insertion(plan, n, task, state.first_free(n))
+                if proposal is not None and (best is None or proposal.delta < best.delta):
+                    best = proposal
+            if best is None or best.delta >= 0:
+                break
+            plan.apply(best)
+            insertions += 1
+    return insertions, "done"
+
+
+def deadline_order(state: PlanningState) -> list[int]:
+    """Visible tasks by deadline, then larger demand first, then index."""
+    tasks = state.instance.tasks
+    return sorted(state.visible, key=lambda m: (tasks[m].t_end, -tasks[m].demand, m))
 
 
 class GreedyAllocator(Settings):
@@ -28,25 +57,6 @@ class GreedyAllocator(Settings):
              time_limit: float | None = None) -> PlanResult:
         del seed  # deterministic by construction
         deadline = None if time_limit is None else time.perf_counter() + time_limit
-        instance = state.instance
-        plan = CostEvaluator(instance).state(state.base_routes())
-        order = sorted(state.visible, key=lambda m: (instance.tasks[m].t_end,
-                                                     -instance.tasks[m].demand, m))
-        insertions, stopped = 0, "done"
-        for task in order:
-            while True:
-                if deadline is not None and time.perf_counter() > deadline:
-                    stopped = "time-limit"
-                    break
-                best = None
-                for n in range(instance.n_aavs):
-                    proposal = best_insertion(plan, n, task, state.first_free(n))
-                    if proposal is not None and (best is None or proposal.delta < best.delta):
-                        best = proposal
-                if best is None or best.delta >= 0:
-                    break
-                plan.apply(best)
-                insertions += 1
-            if stopped != "done":
-                break
+        plan = CostEvaluator(state.instance).state(state.base_routes())
+        insertions, stopped = insert_cheapest(plan, state, deadline_order(state), deadline)
         return PlanResult(plan.routes, {"insertions": insertions, "stop": stopped})

@@ -104,3 +104,11 @@ def test_amount_types_reach_the_evaluator_unchanged(tmp_path, hand):
     # 2.0 and true are not kilograms: the parser keeps them so the evaluator can say so.
     path = _solution_file(tmp_path, hand, lambda d: d["routes"]["A0"][0].update(amount=2.0))
     assert read_solution(path, hand).routes[0][0].amount == 2.0
+
+
+def test_instances_and_solutions_pickle_for_worker_processes(hand):
+    import pickle
+
+    solution = Solution.from_ids(hand, {"A0": [("T0", 5), "D0"]}, cost=1.0, meta={"m": 1})
+    assert pickle.loads(pickle.dumps(hand)) == hand
+    assert pickle.loads(pickle.dumps(solution)) == solution

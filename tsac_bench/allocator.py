@@ -105,7 +105,11 @@ BUILTIN_METHODS: dict[str, str] = {
     "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
     "exact": "tsac_bench.solvers.exact:ExactAllocator",
     "exact-cpsat": "tsac_bench.solvers.exact:CpSatAllocator",
+    "pyvrp": "tsac_bench.solvers.pyvrp_peer:PyVRPAllocator",
 }
+
+#: The pyproject extra that installs what a built-in method needs, where it needs one.
+METHOD_EXTRAS: dict[str, str] = {"pyvrp": "peers"}
 
 _registered: dict[str, Callable[..., Allocator]] = {}
 
@@ -149,8 +153,9 @@ def allocator_class(name: str) -> Callable[..., Allocator]:
         try:
             return getattr(importlib.import_module(module_name), attr)
         except ImportError as exc:
+            extra = METHOD_EXTRAS.get(name, "all")
             raise MethodUnavailable(f"method {name!r} needs {exc.name!r}: "
-                                    f"pip install -e '.[all]'") from None
+                                    f"pip install -e '.[{extra}]'") from None
     if name in plugins:
         return plugins[name].load()
     raise UnknownMethodError(name, available_methods())

@@ -1,11 +1,11 @@
 import pytest
-from tsac_bench.solvers.greedy import GreedyAllocator
 
 from tsac_bench.allocator import PlanningState
 from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.generator import generate
 from tsac_bench.model import Solution, Visit
 from tsac_bench.solve import solve
+from tsac_bench.solvers.greedy import GreedyAllocator
 
 
 def test_greedy_on_the_hand_instance(hand):

@@ -88,6 +88,11 @@ class Instance:
         object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
         validate_instance(self)
 
+    def __reduce__(self) -> tuple:
+        # mappingproxy does not pickle; worker processes and Dask need instances to.
+        return (type(self), (self.name, self.aavs, self.depots, self.tasks, self.horizon,
+                             self.weights, self.seed, dict(self.meta)))
+
     # --- sizes and indices -------------------------------------------------------------
     @property
     def n_aavs(self) -> int:

@@ -40,6 +40,10 @@ class Solution:
         object.__setattr__(self, "routes", tuple(as_route(r) for r in self.routes))
         object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
 
+    def __reduce__(self) -> tuple:
+        # mappingproxy does not pickle; worker processes and Dask need solutions to.
+        return (type(self), (self.instance, self.routes, self.cost, dict(self.meta)))
+
     @classmethod
     def empty(cls, instance: Instance, **kwargs: object) -> Solution:
         return cls(instance.name, tuple(() for _ in instance.aavs), **kwargs)

@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.formulations.network import (
     DIRECT,
     START,
@@ -33,8 +34,6 @@ from tsac_bench.formulations.network import (
     parse_prefix,
     prefix_arrivals,
 )
-
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.model import Instance, Route, Visit
 
 

@@ -81,6 +81,11 @@ def canonical_routes(instance: Instance, routes: Sequence[Route],
                 continue  # a committed depot visit already precedes it
             else:
                 merged.append(v)
+        for i, v in enumerate(merged):
+            if is_depot(v.node) and i + 1 < len(merged):
+                prev = merged[i - 1].node if i > 0 else (
+                    head[-1].node if head else instance.start_node(n))
+                merged[i] = Visit(best_depot(instance, prev, v.node, merged[i + 1].node))
         # Drop trailing depot visits; one is added back after the last task.
         while merged and is_depot(merged[-1].node):
             merged.pop()
@@ -143,11 +148,8 @@ def aav_network(instance: Instance, n: int, tasks: Sequence[int],
     def modes(i: int, j: int) -> list[tuple[int, float, float]]:
         """(mode, distance, leg) of every undominated way from i to j."""
         p = position(i)
-        via = [(k, dist[p][k] + dist[k][j], dist[k][j]) for k in depots]
-        undominated = [m for m in via if not any(
-            (o[1], o[2], o[0]) < (m[1], m[2], m[0]) and o[1] <= m[1] and o[2] <= m[2]
-            for o in via)]
-        options = sorted(undominated)
+        options = sorted({(k, *depot_leg(instance, p, k, j))
+                          for k in (best_depot(instance, p, k, j) for k in depots)})
         if not (i == START and instance.tasks[j].is_delivery):
             options.insert(0, (DIRECT, dist[p][j], dist[p][j]))
         return options
@@ -157,12 +159,13 @@ def aav_network(instance: Instance, n: int, tasks: Sequence[int],
     for j in tasks:
         task = instance.tasks[j]
         first = modes(START, j)
-        shortest = min(m[1] for m in first)
+        # Bounds are widened by float noise so that a route's own walk always fits them.
+        shortest = min(m[1] for m in first) * (1 - 1e-12)
         if j in fixed_arrival:
             early = late = fixed_arrival[j]
         else:
-            early, late = max(task.t_start, shortest / v), task.t_end
-            if early > late + TIME_TOLERANCE:
+            early, late = max(task.t_start, shortest / v), task.t_end + TIME_TOLERANCE
+            if early > late:
                 continue
         earliest[j], latest[j], min_distance[j] = early, late, shortest
         kept.append(j)
@@ -185,6 +188,21 @@ def aav_network(instance: Instance, n: int, tasks: Sequence[int],
         leg = dist[p][j] if mode == DIRECT else dist[mode][j]
         network.arcs.append(Arc(i, j, mode, distance, leg, distance / v))
     return network
+
+
+def depot_leg(instance: Instance, p: int, k: int, j: int) -> tuple[float, float]:
+    """(distance, leg into j) of flying p -> depot k -> task j."""
+    dist = instance.dist_rows
+    return dist[p][k] + dist[k][j], dist[k][j]
+
+
+def best_depot(instance: Instance, p: int, k: int, j: int) -> int:
+    """The depot that replaces k between p and task j: among the depots no farther in total
+    and no farther from j (same loads, no later, no costlier leg into j) the first by
+    (distance, leg, index). It is undominated, so the exact models keep only these."""
+    distance, leg = depot_leg(instance, p, k, j)
+    candidates = [(*depot_leg(instance, p, o, j), o) for o in instance.depot_nodes]
+    return min(c for c in candidates if c[0] <= distance and c[1] <= leg)[2]
 
 
 @dataclass(frozen=True)

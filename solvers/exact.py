@@ -18,11 +18,10 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from tsac_bench.solvers.greedy import GreedyAllocator
-
 from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.solvers.greedy import GreedyAllocator
 
 #: The evaluator's J and an optimal solver's objective agree to this relative tolerance.
 OBJECTIVE_TOLERANCE = 1e-6

@@ -3,7 +3,7 @@ from pathlib import Path
 import pytest
 
 from tsac_bench.io import read_instance
-from tsac_bench.model import Instance, Solution
+from tsac_bench.model import Instance
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).parent.parent
@@ -23,11 +23,6 @@ def hand() -> Instance:
 @pytest.fixture(scope="session")
 def paper_x20() -> Instance:
     return read_instance(ROOT / "instances" / "paper" / "paper-small-x20.json")
-
-
-def plan(instance: Instance, **routes: list) -> Solution:
-    """``plan(hand, A0=[("T0", 5), "D0"])``: a solution from ids, other AAVs idle."""
-    return Solution.from_ids(instance, routes)
 
 
 def pytest_collection_modifyitems(config, items):

@@ -5,7 +5,7 @@ docs/model.md walks through the multi-trip case.
 """
 
 import pytest
-from conftest import plan
+from builders import plan
 
 from tsac_bench.evaluator import CostEvaluator, InfeasibleSolution
 from tsac_bench.model import Solution

@@ -110,12 +110,25 @@ class PlanResult:
     cost: float | None = None
 
 
+#: The planning modes of tsac_bench.solve; a method that declares ``modes`` plans only those.
+ALL_MODES = ("static", "dynamic")
+
+
 @runtime_checkable
 class Allocator(Protocol):
+    """``name`` is what users type. An allocator may also declare ``modes`` (a tuple of
+    "static", "dynamic"; both when absent): the planning states it can handle. "static"
+    states have nothing committed; "dynamic" ones have committed prefixes and hidden tasks."""
+
     name: ClassVar[str]
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult: ...
+
+
+def supported_modes(allocator: object) -> tuple[str, ...]:
+    """The modes an allocator (class or instance) declares it can plan."""
+    return tuple(getattr(allocator, "modes", ALL_MODES))
 
 
 class Settings:
@@ -134,6 +147,8 @@ BUILTIN_METHODS: dict[str, str] = {
     "rocf": "tsac_bench.solvers.rocf:ROCFAllocator",
     "dga": "tsac_bench.solvers.dga:DGAAllocator",
     "cnp": "tsac_bench.solvers.cnp:ContractNetAllocator",
+    "exact": "tsac_bench.solvers.exact:ExactAllocator",
+    "exact-cpsat": "tsac_bench.solvers.exact:CpSatAllocator",
     "pyvrp": "tsac_bench.solvers.pyvrp_peer:PyVRPAllocator",
 }
 

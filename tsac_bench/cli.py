@@ -152,6 +152,8 @@ def solve(
     mode: Annotated[str, typer.Option(help="static (every task known at t=0) or dynamic "
                                       "(re-plan at each release time)")] = "static",
     out: Annotated[Path | None, typer.Option(help="write the solution JSON here")] = None,
+    polish: Annotated[bool, typer.Option("--polish", help="re-optimise the payload amounts "
+                                         "of the routes found (cvxpy + HiGHS)")] = False,
 ) -> None:
     """Run one method on one instance and print J (dynamic: also J after each re-plan).
 
@@ -161,8 +163,7 @@ def solve(
 
     instance = read_instance(instance_path)
     outcome = run_solve(instance, method, seed=seed, time_limit=time_limit, mode=mode)
-    if out is not None:
-        write_solution(outcome.solution, instance, out)
+    solution = outcome.solution
     if mode == "dynamic":
         table = Table("t (s)", "released", "visible", "committed", "J known before",
                       "J known", "J", "plan (s)")
@@ -174,6 +175,44 @@ def solve(
         console.print(table)
     console.print(f"{instance.name}  {method}  {mode}  J = {outcome.cost:.6f}  "
                   f"({outcome.wall_time:.3f} s)")
+    if polish:
+        from tsac_bench.polish import polish as polish_solution
+
+        solution = polish_solution(instance, solution)
+        console.print(f"{instance.name}  {method}+polish  J = {solution.cost:.6f}")
+    if out is not None:
+        write_solution(solution, instance, out)
+
+
+@app.command()
+@user_errors
+def verify(
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="a directory with a "
+                                              "manifest.json of proven optima")],
+    method: Annotated[list[str] | None, typer.Option(help="exact backend(s) to re-run "
+                                                     "(default: exact and exact-cpsat)")]
+    = None,
+    only: Annotated[list[str] | None, typer.Option(help="instance name(s) to check")] = None,
+    time_limit: Annotated[float | None, typer.Option(help="seconds per solve")] = 600.0,
+    threads: Annotated[int, typer.Option(min=1)] = 1,
+) -> None:
+    """Re-solve a directory's instances and compare with its manifest (exit 1 on failure)."""
+    from tsac_bench.formulations.regression import BACKENDS
+    from tsac_bench.formulations.regression import verify as run_verify
+
+    checks = run_verify(directory, tuple(method or BACKENDS), time_limit, only, threads)
+    table = Table("instance", "method", "J*", "J", "lower bound", "status", "time (s)",
+                  "result")
+    for c in checks:
+        table.add_row(c.instance, c.method, "-" if c.J_star is None else f"{c.J_star:.6f}",
+                      f"{c.J:.6f}", "-" if c.lower_bound is None else f"{c.lower_bound:.6f}",
+                      c.status, f"{c.wall_time:.1f}",
+                      "pass" if c.passed else f"FAIL {c.reason}")
+    console.print(table)
+    failed = sum(not c.passed for c in checks)
+    console.print(f"{len(checks) - failed}/{len(checks)} passed")
+    if failed or not checks:
+        raise typer.Exit(1)
 
 
 @app.command()

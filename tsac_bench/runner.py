@@ -21,6 +21,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from tsac_bench.allocator import (
+    MethodUnavailable,
+    allocator_class,
+    available_methods,
+    supported_modes,
+)
 from tsac_bench.errors import InputError, TsacBenchError
 from tsac_bench.model import Instance
 from tsac_bench.store import ResultStore, job_key
@@ -156,8 +162,6 @@ def resolve_methods(requested: Sequence[str] | None) -> tuple[list[str], list[st
 
     Named methods must exist and be importable (a typo is an error, not 100 failed jobs);
     by default every available method runs and the unavailable ones are noted."""
-    from tsac_bench.allocator import MethodUnavailable, allocator_class, available_methods
-
     if requested:
         for name in requested:
             allocator_class(name)  # raises UnknownMethodError / MethodUnavailable
@@ -198,7 +202,8 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[str],
         for method in methods:
             limit = (time_limit if time_limit is not None
                      else default_time_limit(method, instance.n_tasks))
-            for mode in modes:
+            # A method that plans only some modes gets no job in the others (not a failure).
+            for mode in (m for m in modes if m in supported_modes(allocator_class(method))):
                 for seed in range(seeds):
                     key = job_key(instance.name, method, mode, seed)
                     spec = {"key": key, "instance": loaded.data, "instance_file": str(loaded.path),

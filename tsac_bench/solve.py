@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsac_bench.allocator import Allocator, PlanningState, make_allocator
+from tsac_bench.allocator import Allocator, PlanningState, make_allocator, supported_modes
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.evaluator import Evaluation
 from tsac_bench.model import Instance, Solution
@@ -56,6 +56,10 @@ def solve(instance: Instance, method: str | Allocator, *, seed: int = 0,
     if mode not in MODES:
         raise TsacBenchError(f"unknown mode {mode!r}; known modes: {', '.join(MODES)}")
     allocator = make_allocator(method, **(settings or {})) if isinstance(method, str) else method
+    if mode not in supported_modes(allocator):
+        supported = " and ".join(supported_modes(allocator))
+        raise TsacBenchError(f"method {allocator.name!r} plans {supported} states only, "
+                             f"not {mode!r} ones")
     if mode == "static":
         plan = checked_plan(allocator, PlanningState.static(instance), seed=seed,
                             time_limit=time_limit)

@@ -8,7 +8,13 @@ gets ``TIME_LIMIT`` seconds, so that the exact solvers take part too.
 import pytest
 from solver_cases import edge_cases, paper_x20, quick
 
-from tsac_bench.allocator import MethodUnavailable, allocator_class, available_methods
+from tsac_bench.allocator import (
+    MethodUnavailable,
+    allocator_class,
+    available_methods,
+    supported_modes,
+)
+from tsac_bench.errors import TsacBenchError
 from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.io import read_solution, write_solution
 from tsac_bench.solve import SolveOutcome, solve
@@ -28,6 +34,8 @@ def method(request) -> str:
 
 
 def run(instance, method, mode, seed=0, time_limit=TIME_LIMIT) -> SolveOutcome:
+    if mode not in supported_modes(allocator_class(method)):
+        pytest.skip(f"{method} declares modes {supported_modes(allocator_class(method))}")
     outcome = solve(instance, method, seed=seed, time_limit=time_limit, mode=mode)
     # solve() already rejects forbidden and infeasible plans; the verdict is re-derived here
     # from the routes alone, as any reader of the solution file would.
@@ -36,6 +44,15 @@ def run(instance, method, mode, seed=0, time_limit=TIME_LIMIT) -> SolveOutcome:
     assert outcome.cost == fresh.J == outcome.solution.cost
     assert outcome.claim_matches, (outcome.claimed_cost, outcome.cost)
     return outcome
+
+
+def test_an_undeclared_mode_is_refused_with_one_clear_line(method):
+    unsupported = [m for m in ("static", "dynamic")
+                   if m not in supported_modes(allocator_class(method))]
+    if not unsupported:
+        pytest.skip(f"{method} plans every mode")
+    with pytest.raises(TsacBenchError, match=f"plans .* states only, not '{unsupported[0]}'"):
+        solve(quick("quick-3-6-s3"), method, mode=unsupported[0])
 
 
 def served(outcome, task_id) -> float:

@@ -1,0 +1,144 @@
+"""``exact`` (Pyomo MILP solved by HiGHS) and ``exact-cpsat`` (OR-Tools CP-SAT): the optimum
+of Problem 1 behind the Allocator protocol.
+
+Both start from the ``greedy`` plan (a MIP start for HiGHS, a hint for CP-SAT) and return it
+when the solver finds nothing better in time. ``PlanResult.stats`` records status (optimal |
+feasible | no-solution | error), the solver's objective, the evaluator's J of the returned
+routes, lower bound, relative MIP gap, solver name and version, threads, seed, wall time and
+the solver's stop reason.
+
+``exact`` is exact for a dynamic PlanningState too: the committed prefixes are fixed arcs and
+amounts of the MILP (a late committed visit keeps its C_time = 1), only visible tasks are
+added. ``exact-cpsat`` solves static states (no committed visits) over the visible tasks and
+refuses others: it is the independent cross-check of the offline optimum.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from tsac_bench.allocator import PlanningState, PlanResult, Settings
+from tsac_bench.errors import TsacBenchError
+from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.solvers.greedy import GreedyAllocator
+
+#: The evaluator's J and an optimal solver's objective agree to this relative tolerance.
+OBJECTIVE_TOLERANCE = 1e-6
+
+
+def _limit(own: float | None, call: float | None) -> float | None:
+    limits = [x for x in (own, call) if x is not None]
+    return min(limits) if limits else None
+
+
+def _greedy(state: PlanningState) -> tuple:
+    return GreedyAllocator().plan(state).routes
+
+
+class ExactAllocator(Settings):
+    """The MILP of formulations/milp.py solved by HiGHS."""
+
+    name = "exact"
+
+    def __init__(self, time_limit: float | None = None, threads: int = 1,
+                 mip_rel_gap: float = 1e-9, warm_start: bool = True,
+                 symmetry: bool = True, capacity_cuts: bool = True) -> None:
+        self.time_limit = time_limit
+        self.threads = threads
+        self.mip_rel_gap = mip_rel_gap
+        self.warm_start = warm_start
+        self.symmetry = symmetry
+        self.capacity_cuts = capacity_cuts
+
+    def plan(self, state: PlanningState, *, seed: int = 0,
+             time_limit: float | None = None) -> PlanResult:
+        from tsac_bench.formulations.milp import (
+            MilpOptions,
+            build_milp,
+            canonical_warm_start,
+            decode,
+            solve_milp,
+        )
+        from tsac_bench.formulations.network import UnsupportedPrefix
+
+        began = time.perf_counter()
+        limit = _limit(self.time_limit, time_limit)
+        instance = state.instance
+        evaluator = CostEvaluator(instance)
+        start = _greedy(state)
+        stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start)}
+        try:
+            model = build_milp(instance, state.visible, state.committed, MilpOptions(
+                symmetry=self.symmetry, capacity_cuts=self.capacity_cuts))
+        except UnsupportedPrefix as exc:
+            stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
+            return PlanResult(start, stats)
+        built = time.perf_counter() - began
+        warm = False
+        if self.warm_start:
+            canonical_warm_start(model, start, state.committed)
+            warm = True
+        remaining = None if limit is None else max(0.01, limit - (time.perf_counter() - began))
+        report = solve_milp(model, time_limit=remaining, threads=self.threads,
+                            mip_rel_gap=self.mip_rel_gap, seed=seed, warm=warm)
+        routes = decode(model) if report.has_solution else start
+        stats.update(report.as_stats())
+        stats["build_time"] = built
+        stats["wall_time"] = time.perf_counter() - began
+        return _checked(evaluator, routes, stats)
+
+
+class CpSatAllocator(Settings):
+    """The CP-SAT model of formulations/cpsat.py (static states)."""
+
+    name = "exact-cpsat"
+    modes = ("static",)
+
+    def __init__(self, time_limit: float | None = None, threads: int = 1,
+                 rel_gap: float = 0.0, warm_start: bool = True) -> None:
+        self.time_limit = time_limit
+        self.threads = threads
+        self.rel_gap = rel_gap
+        self.warm_start = warm_start
+
+    def plan(self, state: PlanningState, *, seed: int = 0,
+             time_limit: float | None = None) -> PlanResult:
+        from tsac_bench.formulations.cpsat import solve_cpsat_isolated
+        from tsac_bench.formulations.network import canonical_routes
+
+        if any(state.committed):
+            raise TsacBenchError("exact-cpsat solves static planning states only (no "
+                                 "committed visits); use 'exact' in a dynamic run")
+        began = time.perf_counter()
+        instance = state.instance
+        evaluator = CostEvaluator(instance)
+        start = _greedy(state)
+        stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start)}
+        outcome = solve_cpsat_isolated(
+            instance, sorted(state.visible), time_limit=_limit(self.time_limit, time_limit),
+            threads=self.threads, seed=seed, rel_gap=self.rel_gap,
+            hint_routes=canonical_routes(instance, start) if self.warm_start else None)
+        routes = outcome.routes if outcome.routes is not None else start
+        stats.update(outcome.stats)
+        stats["wall_time"] = time.perf_counter() - began
+        return _checked(evaluator, routes, stats, objective_key="scaled_objective",
+                        tolerance=None)
+
+
+def _checked(evaluator: CostEvaluator, routes: tuple, stats: dict[str, Any],
+             objective_key: str = "objective", tolerance: float | None = OBJECTIVE_TOLERANCE
+             ) -> PlanResult:
+    """Record the evaluator's J; an optimal solver objective that disagrees with it beyond
+    ``tolerance`` marks the result as an error (a model bug), never silently passes."""
+    J = evaluator.cost(routes)
+    stats["J"] = J
+    objective = stats.get(objective_key)
+    if (tolerance is not None and stats.get("status") == "optimal" and objective is not None
+            and abs(J - objective) > tolerance * max(1.0, abs(J))):
+        stats["status"] = "error"
+        stats["stop_reason"] = f"solver objective {objective} != evaluator J {J}"
+    bound = stats.get("lower_bound")
+    if bound is not None:
+        stats["mip_gap"] = max(0.0, J - bound) / max(abs(J), 1e-10)
+    return PlanResult(tuple(routes), stats)

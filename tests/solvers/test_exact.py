@@ -1,0 +1,162 @@
+"""The exact allocators: optimal results equal the evaluator's J, bounds are bounds, dynamic
+planning states are solved exactly, and no method beats a proven optimum."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from tsac_bench.allocator import MethodUnavailable, PlanningState, available_methods
+from tsac_bench.cli import app
+from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.io import read_instance
+from tsac_bench.solve import solve
+from tsac_bench.solvers.exact import CpSatAllocator, ExactAllocator
+from tsac_bench.solvers.greedy import GreedyAllocator
+
+pytest.importorskip("pyomo")
+pytest.importorskip("ortools")
+
+ROOT = Path(__file__).resolve().parents[2]
+REGRESSION = ROOT / "instances" / "regression"
+QUICK = ROOT / "instances" / "quick"
+MANIFEST = json.loads((REGRESSION / "manifest.json").read_text())["instances"]
+#: Instances both backends prove within a second or two: the default suite's subset.
+FAST = ["reg-static-2-4-s1", "reg-static-2-5-s3", "reg-release-2-4-s12",
+        "reg-release-2-5-s11", "reg-release-3-5-s11"]
+STATS = {"status", "objective", "lower_bound", "mip_gap", "solver", "solver_version",
+         "threads", "seed", "wall_time", "stop_reason", "J"}
+
+
+def regression(name: str):
+    return read_instance(REGRESSION / MANIFEST[name]["file"])
+
+
+@pytest.mark.parametrize("name", FAST)
+def test_both_backends_reproduce_the_manifest_optimum(name: str) -> None:
+    instance = regression(name)
+    J_star = MANIFEST[name]["J_star"]
+    for allocator in (ExactAllocator(), CpSatAllocator()):
+        result = allocator.plan(PlanningState.static(instance), seed=0)
+        assert set(result.stats) >= STATS
+        assert result.stats["status"] == "optimal"
+        J = CostEvaluator(instance).cost(result.routes)
+        assert pytest.approx(J_star, rel=1e-6) == J
+        assert result.stats["J"] == pytest.approx(J, rel=1e-12)
+        assert result.stats["lower_bound"] <= J + 1e-6
+    # HiGHS's own objective is the evaluator's J of the decoded routes.
+    result = ExactAllocator().plan(PlanningState.static(instance))
+    assert result.stats["objective"] == pytest.approx(result.stats["J"], rel=1e-6)
+    assert result.stats["solver"] == "highs" and result.stats["threads"] == 1
+
+
+def _no_method_beats(names: list[str]) -> None:
+    others = [m for m in available_methods() if m not in ("exact", "exact-cpsat")]
+    assert "greedy" in others
+    for name in names:
+        instance = regression(name)
+        J_star = MANIFEST[name]["J_star"] or MANIFEST[name]["lower_bound"]
+        for method in others:
+            try:
+                outcome = solve(instance, method, seed=0, time_limit=2.0)
+            except MethodUnavailable:
+                continue
+            assert J_star <= outcome.cost + 1e-6 * max(1.0, outcome.cost), (name, method)
+
+
+def test_no_method_beats_the_optimum_fast_subset() -> None:
+    _no_method_beats(FAST)
+
+
+@pytest.mark.slow
+def test_no_method_beats_the_optimum_on_every_regression_instance() -> None:
+    _no_method_beats(sorted(MANIFEST))
+
+
+def test_every_regression_instance_is_proven_and_agreed() -> None:
+    assert len(MANIFEST) >= 20
+    assert any("release" in name for name in MANIFEST)
+    for name, entry in MANIFEST.items():
+        assert entry["status"] == "optimal", name
+        J = {m: s["J"] for m, s in entry["solvers"].items()}
+        assert J["exact"] == pytest.approx(J["exact-cpsat"], rel=1e-6), name
+        greedy = CostEvaluator(regression(name)).cost(
+            GreedyAllocator().plan(PlanningState.static(regression(name))).routes)
+        assert entry["J_star"] <= greedy + 1e-9
+
+
+@pytest.mark.parametrize("allocator", [ExactAllocator(time_limit=3.0),
+                                       CpSatAllocator(time_limit=3.0)],
+                         ids=["exact", "exact-cpsat"])
+def test_a_time_limited_run_returns_a_plan_and_a_bound(allocator) -> None:
+    instance = read_instance(QUICK / "quick-4-10-s5.json")
+    result = allocator.plan(PlanningState.static(instance))
+    J = CostEvaluator(instance).cost(result.routes)
+    assert result.stats["status"] in ("optimal", "feasible")
+    assert result.stats["lower_bound"] is not None
+    assert result.stats["lower_bound"] <= J + 1e-9
+    assert result.stats["warm_start_J"] + 1e-9 >= J
+    assert result.stats["mip_gap"] >= 0
+
+
+def test_fixing_a_prefix_of_an_optimal_plan_keeps_the_optimum() -> None:
+    name = "reg-static-2-5-s3"
+    instance = regression(name)
+    best = ExactAllocator().plan(PlanningState.static(instance)).routes
+    committed = tuple(route[:2] for route in best)
+    state = PlanningState(instance, 100.0, frozenset(range(instance.n_tasks)), committed)
+    result = ExactAllocator().plan(state)
+    assert state.violations(result.routes) == []
+    assert result.stats["status"] == "optimal"
+    assert result.stats["J"] == pytest.approx(MANIFEST[name]["J_star"], rel=1e-6)
+
+
+def test_a_dynamic_state_is_solved_over_its_visible_tasks_after_its_prefixes() -> None:
+    instance = regression("reg-release-2-5-s11")
+    visible = frozenset(range(3))
+    greedy_state = PlanningState(instance, 0.0, visible)
+    greedy = GreedyAllocator().plan(greedy_state).routes
+    committed = tuple(route[:1] for route in greedy)
+    state = PlanningState(instance, 50.0, visible, committed)
+    result = ExactAllocator().plan(state)
+    assert state.violations(result.routes) == []
+    completion = GreedyAllocator().plan(state).routes
+    evaluator = CostEvaluator(instance)
+    assert result.stats["J"] <= evaluator.cost(completion) + 1e-9
+    assert result.stats["objective"] == pytest.approx(result.stats["J"], rel=1e-6)
+    hidden = [b for m, b in enumerate(evaluator.evaluate(result.routes).per_task)
+              if m not in visible]
+    assert all(not b.coalition for b in hidden)
+    with pytest.raises(Exception, match="static planning states only"):
+        CpSatAllocator().plan(state)
+
+
+def test_verify_passes_on_the_manifest_and_fails_on_a_wrong_optimum(tmp_path: Path) -> None:
+    names = FAST[:2]
+    entries = {n: MANIFEST[n] for n in names}
+    for entry in entries.values():
+        shutil.copy(REGRESSION / entry["file"], tmp_path / entry["file"])
+    manifest = {"format": "tsac-bench/manifest@1", "instances": entries}
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    runner = CliRunner()
+    ok = runner.invoke(app, ["verify", str(tmp_path), "--time-limit", "60"])
+    assert ok.exit_code == 0, ok.output
+    assert "4/4 passed" in ok.output
+    entries[names[0]] = {**entries[names[0]], "J_star": entries[names[0]]["J_star"] * 0.99}
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    bad = runner.invoke(app, ["verify", str(tmp_path), "--method", "exact"])
+    assert bad.exit_code == 1
+    assert "FAIL" in bad.output
+
+
+def test_solve_with_polish_prints_both_costs(tmp_path: Path) -> None:
+    out = tmp_path / "sol.json"
+    result = CliRunner().invoke(app, ["solve", str(QUICK / "quick-3-6-s4.json"), "--polish",
+                                      "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "greedy+polish" in result.output
+    assert out.exists()

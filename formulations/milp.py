@@ -77,12 +77,12 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
     networks = []
     for n in range(n_aavs):
         prefix = prefixes[n]
-        mine = {m for _, m, _, _ in prefix.steps}
-        allowed = [m for m in chosen if m not in in_prefix or m in mine]
         required = [(i, j, k) for i, j, k, _ in prefix.steps]
         trailing = None if prefix.trailing_depot is None else (prefix.last,
                                                                  prefix.trailing_depot)
-        networks.append(aav_network(instance, n, allowed, prefix_arrivals(
+        # Every AAV may join any chosen task, also one another AAV's prefix has committed to:
+        # a partly served task's coalition can still grow.
+        networks.append(aav_network(instance, n, chosen, prefix_arrivals(
             instance, n, committed[n]), required, trailing))
     w1, w2, w3 = instance.weights
     horizon = instance.horizon

@@ -160,3 +160,22 @@ def test_solve_with_polish_prints_both_costs(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "greedy+polish" in result.output
     assert out.exists()
+
+
+def test_exact_lets_another_aav_join_a_task_committed_in_a_prefix():
+    # A0 has committed 10 of T0's 20 kg (it is flying there); the rest is A1's to bring.
+    # Both arrive at 50 s; E_base = 10 * 30 + 500 = 800, each leg of 1 km costs 10 / 800.
+    from tsac_bench.allocator import PlanningState
+    from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind, Visit
+    from tsac_bench.solvers.exact import ExactAllocator
+
+    fast = {"speed": 20, "capacity": 10, "max_range": 30000, "alpha": 10, "lam": 500}
+    instance = Instance(
+        "join", (AAV("A0", 2, 0, 0, **fast), AAV("A1", 2, 0, 0, **fast)),
+        (Depot("D0", 0, 0),), (Task("T0", 1000, 0, TaskKind.PICKUP, 20, 0, 3600),))
+    state = PlanningState(instance, 1.0, frozenset({0}), ((Visit(0, 10),), ()))
+    result = ExactAllocator(time_limit=30).plan(state)
+    assert result.stats["status"] == "optimal"
+    assert result.routes == ((Visit(0, 10), Visit(1)), (Visit(0, 10), Visit(1)))
+    assert CostEvaluator(instance).cost(result.routes) == pytest.approx(
+        10 * 50 / 3600 + 2 * 10 / 800, rel=1e-12)

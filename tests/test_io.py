@@ -112,3 +112,14 @@ def test_instances_and_solutions_pickle_for_worker_processes(hand):
     solution = Solution.from_ids(hand, {"A0": [("T0", 5), "D0"]}, cost=1.0, meta={"m": 1})
     assert pickle.loads(pickle.dumps(hand)) == hand
     assert pickle.loads(pickle.dumps(solution)) == solution
+
+
+def test_a_walk_skips_sweep_sets_unless_they_are_named(tmp_path, hand):
+    from tsac_bench.io import SWEEP_MARKER, iter_instance_files, sweep_sets_below
+
+    for folder in ("quick", "big"):
+        write_instance(hand, tmp_path / folder / "hand.json")
+    (tmp_path / "big" / SWEEP_MARKER).touch()
+    assert iter_instance_files([tmp_path]) == [tmp_path / "quick" / "hand.json"]
+    assert iter_instance_files([tmp_path / "big"]) == [tmp_path / "big" / "hand.json"]
+    assert sweep_sets_below(tmp_path) == [tmp_path / "big"]

@@ -28,6 +28,7 @@ from tsac_bench.allocator import (
     supported_modes,
 )
 from tsac_bench.errors import InputError, TsacBenchError
+from tsac_bench.io import sweep_sets_below
 from tsac_bench.model import Instance
 from tsac_bench.store import ResultStore, job_key
 from tsac_bench.worker import GRACE_SECONDS, hard_timeout
@@ -301,7 +302,9 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
         raise TsacBenchError("no method to run: `tsac-bench methods` lists them")
     loaded, problems = load_instances(config.paths)
     outcome = BatchOutcome(config.out, problems=problems)
-    for line in [*method_notes, *problems]:
+    sweep_notes = [f"skipped sweep set {sweep} (name it to run it)"
+                   for path in config.paths for sweep in sweep_sets_below(path)]
+    for line in [*method_notes, *sweep_notes, *problems]:
         note(line)
     jobs = plan_jobs(loaded, methods, modes, config.seeds, config.time_limit,
                      config.grace)

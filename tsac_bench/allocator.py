@@ -132,6 +132,7 @@ BUILTIN_METHODS: dict[str, str] = {
     "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
     "hocf": "tsac_bench.solvers.hocf:HOCFAllocator",
     "rocf": "tsac_bench.solvers.rocf:ROCFAllocator",
+    "tsac-ocf": "tsac_bench.solvers.tsac_ocf:TSACOCFAllocator",
     "pyvrp": "tsac_bench.solvers.pyvrp_peer:PyVRPAllocator",
 }
 

@@ -24,15 +24,19 @@ from tsac_bench.solve import solve
 SCALES = ("16/40", "32/80")
 
 
-def variants(policy: str | None) -> list[tuple[str, str, dict]]:
+def variants(policy: str | None, ablations: list[str]) -> list[tuple[str, str, dict]]:
     tsac = {"policy": policy} if policy else {}
-    return [
+    rows = [
         ("hocf", "hocf", {}),
         ("rocf", "rocf", {}),
         ("tsac-ocf", "tsac-ocf", tsac),
         ("tsac-ocf T=0.5", "tsac-ocf", {**tsac, "temperature": 0.5}),
         ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**tsac, "temperature": 0.0}),
     ]
+    for item in ablations:
+        label, _, path = item.partition("=")
+        rows.append((label, "tsac-ocf", {"policy": path}))
+    return rows
 
 
 def main() -> None:
@@ -41,6 +45,8 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=900_000)
     parser.add_argument("--policy", default=None, help="policy file (default: shipped)")
     parser.add_argument("--scales", nargs="+", default=list(SCALES))
+    parser.add_argument("--ablation", action="append", default=[], metavar="LABEL=FILE",
+                        help="an extra tsac-ocf row with another policy file")
     parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
@@ -48,7 +54,8 @@ def main() -> None:
     seeds = range(args.first_seed, args.first_seed + args.instances)
     command = (f"python benchmarks/tsac_eval.py --instances {args.instances} --first-seed "
                f"{args.first_seed}" + (f" --policy {args.policy}" if args.policy else "")
-               + f" --scales {' '.join(args.scales)}")
+               + f" --scales {' '.join(args.scales)}"
+               + "".join(f" --ablation {a}" for a in args.ablation))
     lines = [
         "# TSAC-OCF against HOCF and ROCF (dynamic mode, held-out instances)",
         "",
@@ -67,7 +74,7 @@ def main() -> None:
         instances = [generate(scale, seed) for seed in seeds]
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
-        for label, method, settings in variants(args.policy):
+        for label, method, settings in variants(args.policy, args.ablation):
             for instance in instances:
                 began = time.perf_counter()
                 outcome = solve(instance, method, seed=0, mode="dynamic", settings=settings)

@@ -193,6 +193,11 @@ class TaskSelectionEnv(gym.Env):
         self.action_space = gym.spaces.Discrete(max_tasks)
         self.game: CoalitionGame | None = None
 
+    @property
+    def view(self) -> DecisionView:
+        """The deciding AAV's view of the game (what a hand-written selection rule reads)."""
+        return self._view
+
     def set_scales(self, scales: Sequence[str]) -> None:
         """Draw the next episodes from ``generated_moments(scales)`` (the curriculum)."""
         if tuple(scales) != self.scales:

@@ -10,6 +10,7 @@ deterministic per seed. The default policy ships with the package
 
 from __future__ import annotations
 
+import json
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,8 @@ class PolicyFileError(TsacBenchError):
 def save_policy(actor: PolicyNet, path: Path, meta: dict[str, Any]) -> None:
     """Write the actor alone (no critics, no optimiser): what ``tsac-ocf`` loads."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    # Plain JSON types only, so that the file loads with weights_only=True.
+    meta = json.loads(json.dumps(meta, default=str))
     torch.save({"format": POLICY_FORMAT, "config": actor.config.to_dict(),
                 "actor": actor.state_dict(), "meta": meta}, path)
 

@@ -158,12 +158,42 @@ class DiscreteSAC:
             action_mask.sum(dim=-1).clamp(min=1).float())
         return (self.log_alpha * (entropy - target)).mean()
 
-    def update(self, batch: Batch) -> dict[str, float]:
+    def imitate(self, batch: Batch) -> dict[str, float]:
+        """One pre-training step: the actor by cross-entropy on the batch's actions (a
+        demonstrator's), the critics by Eqs. 14-15 under the actor being cloned."""
+        critic_loss = self.critic_loss(batch)
+        self.critic_optimizer.zero_grad()
+        critic_loss.backward()
+        self.critic_optimizer.step()
+        clone_loss = self.clone_loss(batch)
+        self.actor_optimizer.zero_grad()
+        clone_loss.backward()
+        self.actor_optimizer.step()
+        self._track_targets()
+        return {"critic_loss": critic_loss.item(), "clone_loss": clone_loss.item()}
+
+    def _track_targets(self) -> None:
+        with torch.no_grad():
+            for q, target in zip(self.critics, self.targets, strict=True):
+                for p, p_target in zip(q.parameters(), target.parameters(), strict=True):
+                    p_target.lerp_(p, self.config.tau)
+
+    def clone_loss(self, batch: Batch) -> Tensor:
+        """Cross-entropy of the actor against the batch's (a demonstrator's) actions."""
+        _, log_probs = self.actor.distribution(batch.states)
+        return -log_probs.gather(1, batch.actions.unsqueeze(1)).mean()
+
+    def update(self, batch: Batch, demonstrations: Batch | None = None,
+               clone_weight: float = 0.0) -> dict[str, float]:
+        """One SAC step; with ``demonstrations``, the actor loss also carries
+        ``clone_weight`` times the cross-entropy on them (SAC + behaviour cloning)."""
         critic_loss = self.critic_loss(batch)
         self.critic_optimizer.zero_grad()
         critic_loss.backward()
         self.critic_optimizer.step()
         actor_loss, entropy = self.actor_loss(batch)
+        if demonstrations is not None and clone_weight > 0:
+            actor_loss = actor_loss + clone_weight * self.clone_loss(demonstrations)
         self.actor_optimizer.zero_grad()
         actor_loss.backward()
         self.actor_optimizer.step()
@@ -171,10 +201,7 @@ class DiscreteSAC:
         self.alpha_optimizer.zero_grad()
         alpha_loss.backward()
         self.alpha_optimizer.step()
-        with torch.no_grad():
-            for q, target in zip(self.critics, self.targets, strict=True):
-                for p, p_target in zip(q.parameters(), target.parameters(), strict=True):
-                    p_target.lerp_(p, self.config.tau)
+        self._track_targets()
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(),
                 "entropy": entropy.mean().item(), "alpha": self.alpha.item()}
 
@@ -212,9 +239,15 @@ DEFAULT_CURRICULUM: tuple[tuple[float, tuple[str, ...]], ...] = (
 
 @dataclass(frozen=True)
 class TrainConfig:
-    steps: int = 24_000
+    steps: int = 16_000
     seed: int = 0
-    warmup: int = 1_000  # uniformly random valid actions before the first update
+    warmup: int = 4_000  # decisions collected before the first update
+    #: Who takes the warm-up decisions: a registered OCF method's selection rule (its
+    #: decisions then also pre-train the actor by imitation and stay as demonstrations)
+    #: or None (uniformly random).
+    demonstrator: str | None = "hocf"
+    pretrain_updates: int = 1_000  # imitation + critic steps after the warm-up
+    clone_weight: float = 2.0  # weight of the demonstrations' cross-entropy in SAC's actor loss
     update_every: int = 2  # env steps per gradient update
     curriculum: tuple[tuple[float, tuple[str, ...]], ...] = DEFAULT_CURRICULUM
     episode_steps: int = 400  # truncation of one episode (one OCF game)
@@ -279,19 +312,23 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
     steps; returns the summary written to ``curve.json``."""
     out.mkdir(parents=True, exist_ok=True)
     torch_device = resolve_device(device)
-    torch.manual_seed(config.seed)
-    sac = DiscreteSAC(config.net, config.sac, torch_device)
-    buffer = ReplayBuffer(config.sac.buffer_size)
-    rng = np.random.default_rng(config.seed)
-    sampler = torch.Generator().manual_seed(config.seed)
-    log: dict[str, list] = {"updates": [], "episodes": [], "evals": []}
-    step, episode, seconds = 0, 0, 0.0
+    checkpoint = None
     if resume is not None:
         checkpoint = torch.load(resume, map_location=torch_device, weights_only=False)
         # The run goes on as it was configured; only its length may change.
         config = TrainConfig.from_dict({**checkpoint["config"], "steps": config.steps})
+    torch.manual_seed(config.seed)
+    sac = DiscreteSAC(config.net, config.sac, torch_device)
+    buffer = ReplayBuffer(config.sac.buffer_size)
+    demos = ReplayBuffer(config.warmup)  # the demonstrator's decisions, never overwritten
+    rng = np.random.default_rng(config.seed)
+    sampler = torch.Generator().manual_seed(config.seed)
+    log: dict[str, list] = {"updates": [], "episodes": [], "evals": []}
+    step, episode, seconds = 0, 0, 0.0
+    if checkpoint is not None:
         sac.load_state_dict(checkpoint["sac"])
         buffer.items, buffer.position = checkpoint["buffer"], checkpoint["buffer_position"]
+        demos.items = checkpoint["demonstrations"]
         rng.bit_generator.state = checkpoint["rng"]
         sampler.set_state(checkpoint["sampler"])
         log, step, episode = checkpoint["log"], checkpoint["step"], checkpoint["episode"]
@@ -302,16 +339,28 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
 
     def save_checkpoint() -> None:
         torch.save({"config": config.to_dict(), "sac": sac.state_dict(), "buffer": buffer.items,
+                    "demonstrations": demos.items,
                     "buffer_position": buffer.position, "rng": rng.bit_generator.state,
                     "sampler": sampler.get_state(), "log": log, "step": step,
                     "episode": episode, "seconds": time.perf_counter() - began},
                    out / "checkpoint.pt")
 
-    padded, info = env.reset(seed=int(rng.integers(2**31)))
-    state, start_J, returns = unpad(padded), info["J"], 0.0
+    demonstrator = (make_allocator(config.demonstrator) if config.demonstrator is not None
+                     else None)
+    expert_run = demonstrator is not None
+
+    def reset(**kwargs: Any) -> tuple[Observation, float, Any]:
+        padded, info = env.reset(**kwargs)
+        rule = demonstrator.rule(env.game.state) if demonstrator is not None else None
+        return unpad(padded), info["J"], rule
+
+    state, start_J, expert = reset(seed=int(rng.integers(2**31)))
+    returns = 0.0
     stats: dict[str, float] = {}
     while step < config.steps:
-        if step < config.warmup:
+        if step < config.warmup and expert is not None:
+            action = env.game.visible.index(expert.select(env.view, rng))
+        elif step < config.warmup:
             action = int(rng.choice(np.flatnonzero(state.action_mask)))
         else:
             with torch.no_grad():
@@ -319,11 +368,16 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
             action = int(torch.multinomial(probs[0].cpu(), 1, generator=sampler))
         padded, reward, terminated, truncated, info = env.step(action)
         next_state = unpad(padded)
-        buffer.add(Transition(state, action, reward, next_state, terminated))
+        transition = Transition(state, action, reward, next_state, terminated)
+        buffer.add(transition)
+        if step < config.warmup and expert is not None:
+            demos.add(transition)
         state, returns, step = next_state, returns + reward, step + 1
         if step > config.warmup and step % config.update_every == 0:
+            demonstrations = (Batch.of(demos.sample(config.sac.batch_size, rng), torch_device)
+                              if expert_run and len(demos) else None)
             stats = sac.update(Batch.of(buffer.sample(config.sac.batch_size, rng),
-                                        torch_device))
+                                        torch_device), demonstrations, config.clone_weight)
             if step % 50 < config.update_every:
                 log["updates"].append({"step": step, **stats})
         if terminated or truncated:
@@ -331,8 +385,14 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
                                     "J_end": info["J"], "scales": list(env.scales)})
             episode += 1
             env.set_scales(config.scales_at(step))
-            padded, info = env.reset()
-            state, start_J, returns = unpad(padded), info["J"], 0.0
+            state, start_J, expert = reset()
+            returns = 0.0
+        if step == config.warmup and expert is not None:
+            for i in range(config.pretrain_updates):
+                stats = sac.imitate(Batch.of(buffer.sample(config.sac.batch_size, rng),
+                                             torch_device))
+                if i % 50 == 0:
+                    log.setdefault("pretrain", []).append({"update": i, **stats})
         if step % config.eval_every == 0 or step == config.steps:
             log["evals"].append({"step": step, **evaluate(sac.actor)})
             stats = {**stats, **log["evals"][-1]}

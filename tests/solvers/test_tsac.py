@@ -31,7 +31,14 @@ from tsac_bench.solvers.tsac_ocf import (  # noqa: E402
     PolicySelection,
     load_policy,
 )
-from tsac_bench.solvers.tsac_sac import Batch, DiscreteSAC, SACConfig, Transition  # noqa: E402
+from tsac_bench.solvers.tsac_sac import (  # noqa: E402
+    Batch,
+    DiscreteSAC,
+    SACConfig,
+    TrainConfig,
+    Transition,
+    train,
+)
 
 SMALL = NetConfig(AGENT_DIM, TASK_DIM, DEPOT_DIM, d_model=16, heads=2, layers=2,
                   feedforward=32)
@@ -158,11 +165,26 @@ def test_a_few_hundred_updates_lower_the_critic_loss():
     probe = Batch.of(transitions[:128], "cpu")
     with torch.no_grad():
         before = sac.critic_loss(probe).item()
-    for _ in range(200):
+    for _ in range(150):
         sac.update(Batch.of([transitions[i] for i in rng.integers(256, size=32)], "cpu"))
     with torch.no_grad():
         after = sac.critic_loss(probe).item()
     assert after < 0.5 * before
+
+
+def test_training_writes_a_policy_and_resumes_from_its_checkpoint(tmp_path):
+    config = TrainConfig(steps=40, warmup=20, pretrain_updates=5, eval_every=40,
+                         eval_scale="4/10", eval_instances=1, checkpoint_every=20,
+                         curriculum=((0.0, ("4/10",)),), net=SMALL)
+    first = train(tmp_path, config, device="cpu")
+    assert first["steps"] == 40 and len(first["evals"]) == 1
+    assert isinstance(load_policy(tmp_path / "policy.pt"), PolicyNet)
+    more = train(tmp_path, TrainConfig(steps=60), device="cpu",
+                 resume=tmp_path / "checkpoint.pt")
+    # The resumed run keeps its configuration (SMALL network, its curriculum), not the
+    # defaults passed along with the new length.
+    assert more["steps"] == 60 and more["config"]["net"]["d_model"] == SMALL.d_model
+    assert [e["step"] for e in more["evals"]] == [40, 60]
 
 
 def test_the_shipped_policy_loads_without_gpu_or_network(monkeypatch):

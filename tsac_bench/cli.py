@@ -204,7 +204,7 @@ def train(
                                       "curve.json, curve.png")],
     device: Annotated[str, typer.Option(help="auto, cpu or cuda")] = "auto",
     steps: Annotated[int | None, typer.Option(min=1, help="environment steps (decisions) "
-                                              "in all; default 24000")] = None,
+                                              "in all; default 16000")] = None,
     seed: Annotated[int, typer.Option()] = 0,
     resume: Annotated[Path | None, typer.Option(help="a checkpoint.pt to continue from")]
     = None,

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import shlex
 import statistics
 import time
 from pathlib import Path
@@ -55,7 +56,7 @@ def main() -> None:
     command = (f"python benchmarks/tsac_eval.py --instances {args.instances} --first-seed "
                f"{args.first_seed}" + (f" --policy {args.policy}" if args.policy else "")
                + f" --scales {' '.join(args.scales)}"
-               + "".join(f" --ablation {a}" for a in args.ablation))
+               + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation))
     lines = [
         "# TSAC-OCF against HOCF and ROCF (dynamic mode, held-out instances)",
         "",

@@ -360,5 +360,61 @@ def report_command(
     console.print(f"report: {index}")
 
 
+@app.command()
+@user_errors
+def train(
+    out: Annotated[Path, typer.Option(help="output folder: checkpoint.pt, policy.pt, "
+                                      "curve.json, curve.png")],
+    device: Annotated[str, typer.Option(help="auto, cpu or cuda")] = "auto",
+    steps: Annotated[int | None, typer.Option(min=1, help="environment steps (decisions) "
+                                              "in all; default 16000")] = None,
+    seed: Annotated[int, typer.Option()] = 0,
+    resume: Annotated[Path | None, typer.Option(help="a checkpoint.pt to continue from")]
+    = None,
+    threads: Annotated[int, typer.Option(min=1, help="torch CPU threads")] = 1,
+) -> None:
+    """Train the TSAC-OCF task-selection policy (discrete SAC, docs/tsac.md)."""
+    if device not in ("auto", "cpu", "cuda"):
+        raise TsacBenchError(f"--device: expected auto, cpu or cuda, got {device!r}")
+    import torch
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from tsac_bench.solvers.tsac_sac import TrainConfig, resolve_device
+    from tsac_bench.solvers.tsac_sac import train as run_training
+
+    torch.set_num_threads(threads)
+    if resume is not None and not resume.is_file():
+        raise TsacBenchError(f"--resume: {resume} is not a file")
+    try:
+        resolve_device(device)
+    except ValueError as exc:
+        raise TsacBenchError(str(exc)) from None
+    if steps is None:
+        steps = (torch.load(resume, map_location="cpu", weights_only=False)["config"]["steps"]
+                 if resume is not None else TrainConfig().steps)
+    config = TrainConfig(steps=steps, seed=seed)
+    columns = (TextColumn("[bold]train"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[info]}"))
+    with Progress(*columns, console=console) as progress:
+        bar = progress.add_task("train", total=steps, info="")
+
+        def on_step(step: int, stats: dict[str, float]) -> None:
+            info = " ".join(f"{k}={stats[k]:.3g}" for k in ("critic_loss", "alpha",
+                                                             "eval_ratio_hocf") if k in stats)
+            progress.update(bar, completed=step, info=info)
+
+        summary = run_training(out, config, device=device, resume=resume, on_step=on_step)
+    console.print(f"trained {summary['steps']} steps ({summary['episode_count']} episodes) in "
+                  f"{summary['seconds']:.0f} s on {summary['device']}; policy: "
+                  f"{out / 'policy.pt'}")
+
+
 def main() -> None:
     app()

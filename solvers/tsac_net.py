@@ -1,0 +1,157 @@
+"""The networks of TSAC-OCF (paper Sec. III-B, Fig. 3): a transformer state encoder, the
+masked policy head (the actor, Eqs. 13 and 21) and a per-action Q head (the twin critics).
+
+The networks know nothing about training: ``tsac_sac`` trains them, ``tsac_ocf`` runs the
+frozen actor inside the coalition game (the RL4CO split between policy and algorithm).
+
+Shapes: a batch of B states, each with up to L task tokens and up to K depot tokens.
+``task_mask``/``depot_mask`` are True for real tokens (False for padding);
+``action_mask`` is True for the tasks the deciding AAV may choose (the validity mask).
+Depot tokens are context only: Algorithm 1's moves are ADD/REMOVE on tasks, so the action
+space is the task tokens.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Protocol
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    agent_dim: int
+    task_dim: int
+    depot_dim: int
+    d_model: int = 64
+    heads: int = 4
+    layers: int = 2
+    feedforward: int = 128
+
+    def to_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+def mlp(inputs: int, hidden: int, outputs: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(inputs, hidden), nn.ReLU(), nn.Linear(hidden, outputs))
+
+
+class StateEncoder(nn.Module):
+    """Eq. 20's state -> one context-rich embedding per task token (H_enc of Eq. 12).
+
+    Separate MLP encoders lift agent, task and depot features to d_model; the agent
+    embedding is concatenated with every task and depot embedding and projected back to
+    d_model (contextual fusion); a transformer encoder with multi-head self-attention mixes
+    the tokens, padding excluded through ``src_key_padding_mask``."""
+
+    def __init__(self, config: NetConfig) -> None:
+        super().__init__()
+        d = config.d_model
+        self.agent = mlp(config.agent_dim, d, d)
+        self.task = mlp(config.task_dim, d, d)
+        self.depot = mlp(config.depot_dim, d, d)
+        self.fuse = nn.Linear(2 * d, d)
+        layer = nn.TransformerEncoderLayer(d, config.heads, config.feedforward, dropout=0.0,
+                                           batch_first=True, norm_first=True)
+        # No nested tensors: the padded positions must stay ordinary (finite) rows so that
+        # batches padded to different lengths give the same numbers for the real tokens.
+        self.transformer = nn.TransformerEncoder(layer, config.layers,
+                                                 enable_nested_tensor=False)
+
+    def forward(self, agent: Tensor, tasks: Tensor, task_mask: Tensor, depots: Tensor,
+                depot_mask: Tensor) -> Tensor:
+        n_tasks = tasks.shape[1]
+        agent_embedding = self.agent(agent)
+        tokens = torch.cat([self.task(tasks), self.depot(depots)], dim=1)
+        context = agent_embedding.unsqueeze(1).expand(-1, tokens.shape[1], -1)
+        fused = self.fuse(torch.cat([context, tokens], dim=-1))
+        real = torch.cat([task_mask, depot_mask], dim=1)
+        encoded = self.transformer(fused, src_key_padding_mask=~real)
+        return encoded[:, :n_tasks]
+
+
+class TokenHead(nn.Module):
+    """A state encoder and an MLP giving one number per task token."""
+
+    def __init__(self, config: NetConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.encoder = StateEncoder(config)
+        self.head = mlp(config.d_model, config.d_model, 1)
+
+    def forward(self, obs: Mapping[str, Tensor]) -> Tensor:
+        encoded = self.encoder(obs["agent"], obs["tasks"], obs["task_mask"], obs["depots"],
+                               obs["depot_mask"])
+        return self.head(encoded).squeeze(-1)
+
+
+class PolicyNet(TokenHead):
+    """The actor: masked logits (Eq. 13): invalid and padded tasks get -inf, hence exactly
+    zero probability after the softmax (Eq. 21)."""
+
+    def forward(self, obs: Mapping[str, Tensor]) -> Tensor:
+        return masked_logits(super().forward(obs), obs["action_mask"])
+
+    def distribution(self, obs: Mapping[str, Tensor]) -> tuple[Tensor, Tensor]:
+        """(probabilities, log-probabilities); log-probabilities of invalid tasks are -inf."""
+        logits = self(obs)
+        return torch.softmax(logits, dim=-1), torch.log_softmax(logits, dim=-1)
+
+
+class QNet(TokenHead):
+    """A critic: the soft Q-value of choosing each task (padding and invalid entries are
+    computed but never used: every loss masks them)."""
+
+
+def masked_logits(logits: Tensor, action_mask: Tensor) -> Tensor:
+    """Eq. 13: add M_mask (0 for valid, -inf for invalid) to the raw logits. A state with no
+    valid action (a terminal state in the replay) keeps its raw logits so that the softmax
+    stays finite; the losses give its value weight zero."""
+    usable = action_mask | ~action_mask.any(dim=-1, keepdim=True)
+    return logits.masked_fill(~usable, float("-inf"))
+
+
+def expectation(probs: Tensor, values: Tensor, mask: Tensor) -> Tensor:
+    """sum over the valid actions a of probs[a] * values[a], per state. Entries outside
+    ``mask`` (where values may be -inf) are replaced by zero *before* the product, so that
+    neither the value nor the gradient (0 * -inf) can become nan."""
+    zero = torch.zeros((), dtype=values.dtype, device=values.device)
+    return (probs * torch.where(mask, values, zero)).sum(dim=-1)
+
+
+class State(Protocol):
+    """One unpadded state: what ``tsac_env.observe`` returns."""
+
+    agent: np.ndarray
+    tasks: np.ndarray
+    depots: np.ndarray
+    action_mask: np.ndarray
+
+
+def collate(states: Sequence[State], device: torch.device | str = "cpu") -> dict[str, Tensor]:
+    """Pad a batch of variable-length states to the longest one in the batch (L_max of
+    Eq. 17) and build the padding masks (P_mask) and validity masks."""
+    batch = len(states)
+    length = max(len(s.tasks) for s in states)
+    depots = max(len(s.depots) for s in states)
+    task_dim, depot_dim = states[0].tasks.shape[1], states[0].depots.shape[1]
+    tasks = np.zeros((batch, length, task_dim), dtype=np.float32)
+    depot_rows = np.zeros((batch, depots, depot_dim), dtype=np.float32)
+    task_mask = np.zeros((batch, length), dtype=bool)
+    depot_mask = np.zeros((batch, depots), dtype=bool)
+    action_mask = np.zeros((batch, length), dtype=bool)
+    for i, s in enumerate(states):
+        m, k = len(s.tasks), len(s.depots)
+        tasks[i, :m] = s.tasks
+        depot_rows[i, :k] = s.depots
+        task_mask[i, :m] = True
+        depot_mask[i, :k] = True
+        action_mask[i, :m] = s.action_mask
+    arrays = {"agent": np.stack([s.agent for s in states]).astype(np.float32),
+              "tasks": tasks, "task_mask": task_mask, "depots": depot_rows,
+              "depot_mask": depot_mask, "action_mask": action_mask}
+    return {name: torch.from_numpy(a).to(device) for name, a in arrays.items()}

@@ -1,0 +1,118 @@
+"""``tsac-ocf``: the OCF game with a learned task-selection policy (paper Sec. III-C).
+
+The engine of ``solvers/ocf.py`` plays Algorithm 1 (random AAV permutations, ADD/REMOVE,
+strict-improvement acceptance, tabu list); the selection rule here feeds the deciding AAV's
+state (Eq. 20, ``tsac_env.observe``) to a frozen transformer actor and samples the task from
+the masked distribution (Eq. 21) with the engine's seeded generator, so a run is
+deterministic per seed. The default policy ships with the package
+(``solvers/policies/tsac-default.pt``; how it was trained: docs/tsac.md).
+"""
+
+from __future__ import annotations
+
+import json
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from tsac_bench.allocator import PlanningState, PlanResult
+from tsac_bench.errors import TsacBenchError
+from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
+from tsac_bench.solvers.tsac_env import observe
+from tsac_bench.solvers.tsac_net import NetConfig, PolicyNet, collate
+
+DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
+POLICY_FORMAT = "tsac-bench/policy@1"
+
+
+class PolicyFileError(TsacBenchError):
+    """A policy file that cannot be read or does not fit this version's features."""
+
+
+def save_policy(actor: PolicyNet, path: Path, meta: dict[str, Any]) -> None:
+    """Write the actor alone (no critics, no optimiser): what ``tsac-ocf`` loads."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # Plain JSON types only, so that the file loads with weights_only=True.
+    meta = json.loads(json.dumps(meta, default=str))
+    torch.save({"format": POLICY_FORMAT, "config": actor.config.to_dict(),
+                "actor": actor.state_dict(), "meta": meta}, path)
+
+
+def load_policy(path: Path | str = DEFAULT_POLICY) -> PolicyNet:
+    """The frozen actor of a policy file, on the CPU, in evaluation mode."""
+    path = Path(path)
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise PolicyFileError(f"{path}: cannot read the policy ({exc})") from None
+    if not isinstance(payload, dict) or payload.get("format") != POLICY_FORMAT:
+        raise PolicyFileError(f"{path}: format: expected {POLICY_FORMAT!r}")
+    actor = PolicyNet(NetConfig(**payload["config"]))
+    try:
+        actor.load_state_dict(payload["actor"])
+    except RuntimeError as exc:
+        raise PolicyFileError(f"{path}: actor: does not fit this network ({exc})") from None
+    actor.eval()
+    actor.requires_grad_(False)
+    return actor
+
+
+@cache
+def _cached_policy(path: str) -> PolicyNet:
+    return load_policy(path)
+
+
+class PolicySelection:
+    """Selection rule: sample m* ~ pi(.|s) (Eq. 21). ``temperature`` divides the logits;
+    0 takes the most probable task (lowest index on ties)."""
+
+    def __init__(self, actor: PolicyNet, temperature: float = 1.0) -> None:
+        self.actor = actor
+        self.temperature = temperature
+
+    def probabilities(self, view: DecisionView) -> np.ndarray:
+        """pi(.|s) over ``view.game.visible``: exactly 0 outside the candidates."""
+        with torch.inference_mode():
+            logits = self.actor(collate([observe(view)]))[0].double()
+        if self.temperature > 0:
+            return torch.softmax(logits / self.temperature, dim=-1).numpy()
+        best = torch.zeros_like(logits)
+        best[int(torch.argmax(logits))] = 1.0
+        return best.numpy()
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
+        p = self.probabilities(view)
+        return view.game.visible[int(rng.choice(len(p), p=p))]
+
+
+class TSACOCFAllocator(OCFAllocator):
+    """Settings: ``policy`` (a policy file; default the shipped one), ``temperature`` and
+    the engine's ``k_max``, ``c_max``, ``init``."""
+
+    name = "tsac-ocf"
+
+    def __init__(self, policy: str | None = None, temperature: float = 1.0,
+                 k_max: int = 200_000, c_max: int = 5_000, init: str = "incumbent") -> None:
+        super().__init__(k_max=k_max, c_max=c_max, init=init)
+        if temperature < 0:
+            raise ValueError("temperature must be >= 0")
+        self.policy = policy
+        self.temperature = temperature
+
+    def rule(self, state: PlanningState) -> SelectionRule:
+        del state
+        actor = _cached_policy(str(Path(self.policy) if self.policy else DEFAULT_POLICY))
+        return PolicySelection(actor, self.temperature)
+
+    def plan(self, state: PlanningState, *, seed: int = 0,
+             time_limit: float | None = None) -> PlanResult:
+        # One small state at a time runs fastest on one thread; restored for the caller.
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            return super().plan(state, seed=seed, time_limit=time_limit)
+        finally:
+            torch.set_num_threads(threads)

@@ -28,7 +28,7 @@ import pyvrp
 
 from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.insertion import removal_route
+from tsac_bench.insertion import removal_route, top_up
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.solvers.greedy import deadline_order, insert_cheapest
 
@@ -70,6 +70,8 @@ class PyVRPAllocator(Settings):
         # appears once per route): hand their residual demand to cheapest insertion.
         plan = evaluator.state(decoded)
         decoded_cost = plan.cost
+        # A visit that kept only its first piece may carry more: top it up, then insert.
+        top_up(plan, [state.first_free(n) for n in range(state.instance.n_aavs)])
         insertions, _ = insert_cheapest(plan, state, deadline_order(state))
         return PlanResult(plan.routes, {
             "solver": "pyvrp", "solver_version": version("pyvrp"),

@@ -145,7 +145,9 @@ def write(args: argparse.Namespace) -> None:
         + ", ".join(f"{count.get(s, 0)} at {s}" for s in SCALES)
         + " (the first by seed). Command: `python benchmarks/paper_reproduction.py run "
         "--per-scale N && python benchmarks/paper_reproduction.py write`. The full report "
-        "(tables, statistics, figures) is [index.md](index.md).",
+        "(tables, statistics, figures) is [index.md](index.md); where the reproduction agrees "
+        "with the paper and where it does not, and why we think so, is "
+        "[discussion.md](discussion.md).",
         "",
     ]
     (REPORT / "README.md").write_text("\n".join(header + claims(frame)) + "\n")

@@ -54,7 +54,8 @@ def run(args: argparse.Namespace) -> None:
     run_batch(RunConfig(files, OUT, methods=heuristics, mode="both", **common))
     run_batch(RunConfig([REGRESSION], OUT, methods=heuristics, mode="both", **common))
     exact = [m for m in EXACT_METHODS if m in present]
-    run_batch(RunConfig(instance_files("4/10", args.per_scale), OUT, methods=exact,
+    exact_count = args.per_scale if args.exact_per_scale is None else args.exact_per_scale
+    run_batch(RunConfig(instance_files("4/10", exact_count), OUT, methods=exact,
                         mode="static", time_limit=args.exact_time_limit, **common))
 
 
@@ -161,6 +162,8 @@ def main() -> None:
     parser.add_argument("--per-scale", type=int, default=20)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--exact-time-limit", type=float, default=60.0)
+    parser.add_argument("--exact-per-scale", type=int, default=None,
+                        help="4/10 instances the exact methods run on (default: --per-scale)")
     parser.add_argument("--executor", default="local", choices=["local", "dask"])
     parser.add_argument("--scheduler", default=None)
     args = parser.parse_args()

@@ -9,7 +9,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsac_bench.allocator import Allocator, PlanningState, make_allocator, supported_modes
+from tsac_bench.allocator import (
+    ALL_MODES,
+    Allocator,
+    PlanningState,
+    make_allocator,
+    supported_modes,
+)
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.evaluator import Evaluation
 from tsac_bench.model import Instance, Solution
@@ -18,7 +24,7 @@ from tsac_bench.simulator import InvalidPlan, checked_plan, simulate
 __all__ = ["MODES", "InvalidPlan", "SolveOutcome", "solve"]
 
 #: "static": every task known at t = 0, one plan call. "dynamic": the simulator's run.
-MODES = ("static", "dynamic")
+MODES = ALL_MODES
 
 
 @dataclass(frozen=True)

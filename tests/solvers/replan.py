@@ -1,20 +1,15 @@
-"""Hand-built dynamic planning states for the market baselines' tests (until the simulator
-builds them): what a re-plan at time ``t`` sees after a plan made earlier."""
+"""Hand-built dynamic planning states for the market baselines' tests: what a re-plan at time
+``t`` sees after a plan made earlier (the simulator's own committed-prefix rule)."""
 
 from tsac_bench.allocator import PlanningState
 from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.model import Instance, Route
+from tsac_bench.simulator import committed_prefixes
 
 
 def replan_state(instance: Instance, routes: tuple[Route, ...], t: float) -> PlanningState:
-    """MODEL.md's committed prefix at ``t``: every visit whose previous node the AAV left at
-    or before ``t`` (the start counts as left at time 0); the tasks released by ``t``."""
+    """MODEL.md's committed prefixes at ``t`` > 0 and the tasks released by ``t``."""
     evaluator = CostEvaluator(instance)
-    committed = []
-    for n, route in enumerate(routes):
-        departures = (0.0, *evaluator.trace(n, route).arrivals)
-        k = 0
-        while k < len(route) and departures[k] <= t:
-            k += 1
-        committed.append(tuple(route[:k]))
-    return PlanningState(instance, t, instance.released_by(t), tuple(committed), routes)
+    traces = [evaluator.trace(n, route) for n, route in enumerate(routes)]
+    return PlanningState(instance, t, instance.released_by(t), committed_prefixes(traces, t),
+                         routes)

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pandas as pd
+from paper_reproduction import instance_files  # a sibling script: benchmarks/ is sys.path[0]
 
 from tsac_bench.io import read_instance
 from tsac_bench.report import load
@@ -23,14 +24,11 @@ from tsac_bench.solve import solve
 from tsac_bench.solvers.pyvrp_peer import PyVRPAllocator
 
 ROOT = Path(__file__).resolve().parent.parent
-sys_path = ROOT / "benchmarks"
 SCALES = ("4/10", "8/20", "16/40", "32/80")
 STORE = ROOT / "results" / "paper-reproduction"
 
 
 def main() -> None:
-    from paper_reproduction import instance_files
-
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--per-scale", type=int, default=5)
@@ -75,7 +73,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    import sys
-
-    sys.path.insert(0, str(sys_path))
     main()

@@ -99,23 +99,20 @@ class _Mapping:
         # where it is (the start position or the task it is flying to), reached first.
         self.origins: list[tuple[int, float]] = []  # (depot node, time the AAV is there)
         evaluator = CostEvaluator(instance)
-        for n, aav in enumerate(instance.aavs):
-            prefix = state.committed[n]
-            if prefix:
-                closed = prefix + _closing(instance, prefix)
+        for n, (aav, closed) in enumerate(zip(instance.aavs, state.base_routes(), strict=True)):
+            if closed:
                 trace = evaluator.trace(n, closed)
                 self.origins.append((closed[-1].node, trace.arrivals[-1]))
                 continue
             start = instance.start_node(n)
             depot = instance.nearest_depot(start)
             self.origins.append((depot, float(instance.dist[start, depot]) / aav.speed))
-        served = {v.node for r in state.committed for v in r}
         self.pieces: list[tuple[int, int]] = []  # (task, amount)
         for m in sorted(state.visible):
             demand = instance.tasks[m].demand
             # Committed visits already cover part of the demand: cut pieces from the rest.
             covered = sum(v.amount for r in state.committed for v in r if v.node == m)
-            rest = demand - covered if m in served else demand
+            rest = demand - covered
             while rest > 0:
                 piece = min(self.piece_size, rest)
                 self.pieces.append((m, piece))
@@ -176,8 +173,8 @@ class _Mapping:
         already in the route is dropped, since a task appears once per route (MODEL.md)."""
         instance = self.instance
         routes = []
-        for n, prefix in enumerate(self.state.committed):
-            route = list(prefix + _closing(instance, prefix))
+        for n, closed in enumerate(self.state.base_routes()):
+            route = list(closed)
             if not route or route[-1].node != self.origins[n][0]:
                 route.append(Visit(self.origins[n][0]))
             routes.append(route)

@@ -19,6 +19,7 @@ import platform
 import statistics
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from tsac_bench.generator import generate
@@ -32,25 +33,31 @@ NOTES = (
     "formulations.md), not an open gap. Both backends start from the greedy plan.")
 
 
-def run(sizes: list[str], per_size: int, time_limit: float, threads: int) -> list[dict]:
-    rows = []
-    for size in sizes:
-        for seed in range(1, per_size + 1):
-            instance = generate(size, seed)
-            for method in BACKENDS:
-                began = time.perf_counter()
-                outcome = solve(instance, method, seed=0, time_limit=time_limit,
-                                settings={"threads": threads})
-                stats = outcome.stats
-                row = {"size": size, "seed": seed, "method": method,
-                       "status": stats["status"], "J": outcome.cost,
-                       "lower_bound": stats["lower_bound"], "gap": stats["mip_gap"],
-                       "wall": time.perf_counter() - began,
-                       "greedy": stats.get("warm_start_J")}
-                rows.append(row)
-                print(f"{size} s{seed} {method:12s} {row['status']:9s} J={row['J']:.6f} "
-                      f"LB={row['lower_bound']} gap={row['gap']} {row['wall']:.1f}s", flush=True)
-    return rows
+def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int) -> dict:
+    instance = generate(size, seed)
+    began = time.perf_counter()
+    outcome = solve(instance, method, seed=0, time_limit=time_limit,
+                    settings={"threads": threads})
+    stats = outcome.stats
+    row = {"size": size, "seed": seed, "method": method, "status": stats["status"],
+           "J": outcome.cost, "lower_bound": stats["lower_bound"], "gap": stats["mip_gap"],
+           "wall": time.perf_counter() - began, "greedy": stats.get("warm_start_J")}
+    print(f"{size} s{seed} {method:12s} {row['status']:9s} J={row['J']:.6f} "
+          f"LB={row['lower_bound']} gap={row['gap']} {row['wall']:.1f}s", flush=True)
+    return row
+
+
+def run(sizes: list[str], per_size: int, time_limit: float, threads: int,
+        jobs: int = 1) -> list[dict]:
+    """Every (size, seed, backend) run; ``jobs`` runs go side by side, each in its own
+    process (give each its own core: jobs * threads <= cores, or the times mean little)."""
+    keys = [(size, seed, method) for size in sizes for seed in range(1, per_size + 1)
+            for method in BACKENDS]
+    if jobs == 1:
+        return [solve_one(*key, time_limit, threads) for key in keys]
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = [pool.submit(solve_one, *key, time_limit, threads) for key in keys]
+        return [f.result() for f in futures]
 
 
 def table(rows: list[dict], sizes: list[str], per_size: int, time_limit: float) -> str:
@@ -78,16 +85,18 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--per-size", type=int, default=5)
     parser.add_argument("--time-limit", type=float, default=600.0)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--jobs", type=int, default=1, help="runs side by side")
     parser.add_argument("--out", type=Path, default=ROOT / "reports" / "exact-scaling.md")
     args = parser.parse_args(argv)
-    rows = run(args.sizes, args.per_size, args.time_limit, args.threads)
+    rows = run(args.sizes, args.per_size, args.time_limit, args.threads, args.jobs)
     command = "python benchmarks/exact_scaling.py " + " ".join(argv)
     text = [
         "# Exact backends: time to proven optimality and final gap",
         "",
         f"Command: `{command}`  ",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores ({platform.python_version()}), "
-        f"{args.threads} thread(s) per solve, time limit {args.time_limit:g} s, "
+        f"{args.threads} thread(s) per solve, {args.jobs} solve(s) side by side, "
+        f"time limit {args.time_limit:g} s, "
         f"{args.per_size} instances per size (generator seeds 1..{args.per_size}).",
         "",
         table(rows, args.sizes, args.per_size, args.time_limit),
@@ -105,8 +114,6 @@ def main(argv: list[str]) -> None:
         text.append(f"| {r['size']} | {r['seed']} | {r['method']} | {r['status']} | "
                     f"{r['J']:.6f} | {bound} | {gap} | {r['wall']:.1f} | {r['greedy']:.6f} |")
     args.out.write_text("\n".join(text) + "\n")
-
-
 
 
 if __name__ == "__main__":

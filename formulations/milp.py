@@ -28,6 +28,7 @@ from tsac_bench.formulations.network import (
     Prefix,
     aav_network,
     canonical_routes,
+    coalition_cover_cuts,
     first_task,
     identical_groups,
     late_committed,
@@ -44,6 +45,8 @@ class MilpOptions:
     symmetry: bool = True  # order identical AAVs by their smallest task index
     capacity_cuts: bool = True  # sum of amounts <= B * number of trips
     range_time_link: bool = True  # Dcum <= v * t (no AAV flies faster than its speed)
+    time_flow: bool = True  # arrival times carried on the arcs (a stronger LP than big-M)
+    cover_cuts: bool = True  # a large task needs particular AAVs in full
 
 
 @dataclass
@@ -185,6 +188,9 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
         model.order = pyo.Constraint(zero, rule=lambda m, n, i, j: m.rank[n, j] >= m.rank[
             n, i] + 1 - (len(chosen) + 1) * (1 - sum(m.x[k] for k in pairs[n, i, j])))
 
+    if options.time_flow:
+        _add_time_flow(model, data, arc_of, arcs_in, arcs_out)
+
     # --- loads (Eq. 10): d after a visit >= the deliveries still ahead in the trip --------
     def is_delivery(j: int) -> bool:
         return instance.tasks[j].is_delivery
@@ -301,6 +307,16 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
         model.u[j].fix(0)
         model.Tm[j].fix(instance.tasks[j].t_start)
 
+    if options.cover_cuts:
+        model.cover = pyo.ConstraintList()
+        for j in chosen:
+            members = [n for n, net in enumerate(networks) if j in net.earliest
+                       and (n, j) not in late]
+            upper = {n: upper_amount(n, j) for n in members}
+            for rest, coef in coalition_cover_cuts(upper, instance.tasks[j].demand):
+                model.cover.add(model.covered[j] <= rest + sum(
+                    c * model.y[n, j] for n, c in coef.items()))
+
     # --- committed prefixes: their arcs and amounts are fixed -----------------------------
     for n, prefix in enumerate(prefixes):
         for i, j, mode, amount in prefix.steps:
@@ -331,6 +347,46 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
     model.J = pyo.Objective(expr=data.constant + sum(task_cost(model, j) for j in chosen),
                             sense=pyo.minimize)
     return model
+
+
+def _add_time_flow(model: Any, data: MilpData, arc_of: dict, arcs_in: dict,
+                   arcs_out: dict) -> None:
+    """Arrival times carried on the arcs: r_a is the arrival at a's head when a is flown, 0
+    otherwise, so Z_nj = sum of r over the arcs into j is t_nj * y_nj. The big-M time rows
+    let a fractional arc leave t_nj at its lower bound; here every fraction of flow carries
+    its own arrival, which is what the coalition's C_time then pays for
+    (T_j - t_start >= Z_nj - t_start * y_nj). Valid: at an integer point set each r to the
+    arrival of its head; leaving i along b arrives no earlier than t_i + travel_b, and a route
+    that ends at i has no outgoing r (the end term absorbs Z_ni <= t_end(i))."""
+    import pyomo.environ as pyo
+
+    instance = data.instance
+    networks = data.networks
+
+    def lowest(key: tuple) -> float:
+        n, i, j, _ = key
+        net = networks[n]
+        leave = 0.0 if i == START else net.earliest[i]
+        return max(net.earliest[j], leave + arc_of[key].travel)
+
+    model.r = pyo.Var(model.A, domain=pyo.NonNegativeReals)
+    model.r_low = pyo.Constraint(model.A, rule=lambda m, *k: m.r[k] >= lowest(k) * m.x[k])
+    model.r_high = pyo.Constraint(model.A, rule=lambda m, *k: m.r[k]
+                                  <= networks[k[0]].latest[k[2]] * m.x[k])
+
+    def arrival_flow(m: Any, n: int, j: int) -> Any:
+        return sum(m.r[k] for k in arcs_in[n, j])
+
+    model.r_leave = pyo.Constraint(model.V, rule=lambda m, n, i: sum(
+        m.r[k] - arc_of[k].travel * m.x[k] for k in arcs_out[n, i])
+        >= arrival_flow(m, n, i) - networks[n].latest[i] * m.end[n, i])
+    model.r_arrival = pyo.Constraint(model.V, rule=lambda m, n, j: m.t[n, j]
+                                     >= arrival_flow(m, n, j))
+    late_tasks = {j for _, j in data.late}
+    model.r_coalition = pyo.Constraint(
+        [(n, j) for n, j in model.V if j not in late_tasks],
+        rule=lambda m, n, j: m.Tm[j] - instance.tasks[j].t_start
+        >= arrival_flow(m, n, j) - instance.tasks[j].t_start * m.y[n, j])
 
 
 def _task_latest(data: MilpData, j: int) -> float:
@@ -406,6 +462,8 @@ def warm_start(model: Any, routes: Sequence[Route]) -> None:
             if key not in model.x:
                 raise KeyError(f"AAV {n}: arc {key[1:]} is not in the model")
             model.x[key].set_value(1)
+            if hasattr(model, "r"):
+                model.r[key].set_value(trace.arrivals[k])
             model.y[n, j].set_value(1)
             model.a[n, j].set_value(v.amount)
             model.t[n, j].set_value(trace.arrivals[k])

@@ -25,6 +25,7 @@ load effect, no later, no costlier leg into j).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -274,3 +275,30 @@ def identical_groups(instance: Instance, committed: Sequence[Route]) -> list[lis
 def first_task(route: Route, instance: Instance) -> float:
     """The smallest task index in a route (inf when it has none): the symmetry-breaking key."""
     return min((v.node for v in route if not instance.is_depot(v.node)), default=math.inf)
+
+
+#: Cover cuts are generated for tasks that at most this many AAVs can reach: the family has
+#: 2^N members, and the exact models do not prove instances with larger fleets anyway.
+MAX_COVER_CUT_AAVS = 8
+
+
+def coalition_cover_cuts(upper: dict[int, int], demand: int
+                         ) -> list[tuple[int, dict[int, int]]]:
+    """Valid inequalities covered_j <= rest + sum_{n in S} coef_n * visit_nj, one for each
+    group S of the AAVs that may visit task j, returned as (rest, {n: coef_n}).
+
+    ``upper[n]`` is the most AAV n can bring (min(B_n, R_j)). rest is what the AAVs outside S
+    can bring together; where rest < R_j the coalition needs a member of S to cover more, and
+    each member adds at most min(upper[n], R_j - rest) beyond rest before the demand caps
+    the coverage. The LP relaxation cannot otherwise see that a large task needs a particular
+    AAV in full: with a_nj <= upper[n] * y_nj alone, a fractional y buys part of the goods."""
+    cuts: list[tuple[int, dict[int, int]]] = []
+    aavs = sorted(upper)
+    if len(aavs) > MAX_COVER_CUT_AAVS:
+        return cuts
+    for size in range(1, len(aavs) + 1):
+        for group in itertools.combinations(aavs, size):
+            rest = sum(upper[n] for n in aavs if n not in group)
+            if rest < demand:
+                cuts.append((rest, {n: min(upper[n], demand - rest) for n in group}))
+    return cuts

@@ -43,13 +43,16 @@ class ExactAllocator(Settings):
 
     def __init__(self, time_limit: float | None = None, threads: int = 1,
                  mip_rel_gap: float = 1e-9, warm_start: bool = True,
-                 symmetry: bool = True, capacity_cuts: bool = True) -> None:
+                 symmetry: bool = True, capacity_cuts: bool = True, time_flow: bool = True,
+                 cover_cuts: bool = True) -> None:
         self.time_limit = time_limit
         self.threads = threads
         self.mip_rel_gap = mip_rel_gap
         self.warm_start = warm_start
         self.symmetry = symmetry
         self.capacity_cuts = capacity_cuts
+        self.time_flow = time_flow
+        self.cover_cuts = cover_cuts
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -70,7 +73,8 @@ class ExactAllocator(Settings):
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start)}
         try:
             model = build_milp(instance, state.visible, state.committed, MilpOptions(
-                symmetry=self.symmetry, capacity_cuts=self.capacity_cuts))
+                symmetry=self.symmetry, capacity_cuts=self.capacity_cuts,
+                time_flow=self.time_flow, cover_cuts=self.cover_cuts))
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

@@ -334,8 +334,8 @@ def _worker_solve(instance_data: dict, tasks: list[int] | None, kwargs: dict) ->
 def solve_cpsat_isolated(instance: Instance, tasks: Sequence[int] | None = None,
                          **kwargs: Any) -> CpsatOutcome:
     """``solve_cpsat`` in the CP-SAT worker process (started on first use, then reused)."""
-    import atexit
     import multiprocessing
+    import multiprocessing.util
     from concurrent.futures import ProcessPoolExecutor
 
     from tsac_bench.io import instance_to_dict
@@ -344,7 +344,10 @@ def solve_cpsat_isolated(instance: Instance, tasks: Sequence[int] | None = None,
     if _POOL is None:
         _POOL = ProcessPoolExecutor(max_workers=1,
                                     mp_context=multiprocessing.get_context("spawn"))
-        atexit.register(_POOL.shutdown)
+        # A finalizer, not atexit: it also runs when this process is itself a
+        # multiprocessing worker (which skips atexit), and before multiprocessing joins its
+        # children at exit; otherwise the idle CP-SAT worker is joined forever.
+        multiprocessing.util.Finalize(None, _POOL.shutdown, exitpriority=100)
     future = _POOL.submit(_worker_solve, instance_to_dict(instance),
                           None if tasks is None else list(tasks), kwargs)
     return future.result()

@@ -16,6 +16,7 @@ refuses others: it is the independent cross-check of the offline optimum.
 from __future__ import annotations
 
 import time
+from dataclasses import fields
 from typing import Any
 
 from tsac_bench.allocator import PlanningState, PlanResult, Settings
@@ -43,7 +44,8 @@ class ExactAllocator(Settings):
 
     def __init__(self, time_limit: float | None = None, threads: int = 1,
                  mip_rel_gap: float = 1e-9, warm_start: bool = True,
-                 symmetry: bool = True, capacity_cuts: bool = True, time_flow: bool = True,
+                 symmetry: bool = True, capacity_cuts: bool = True,
+                 range_time_link: bool = True, time_flow: bool = True,
                  cover_cuts: bool = True) -> None:
         self.time_limit = time_limit
         self.threads = threads
@@ -51,6 +53,7 @@ class ExactAllocator(Settings):
         self.warm_start = warm_start
         self.symmetry = symmetry
         self.capacity_cuts = capacity_cuts
+        self.range_time_link = range_time_link
         self.time_flow = time_flow
         self.cover_cuts = cover_cuts
 
@@ -72,9 +75,9 @@ class ExactAllocator(Settings):
         start = _greedy(state)
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start)}
         try:
-            model = build_milp(instance, state.visible, state.committed, MilpOptions(
-                symmetry=self.symmetry, capacity_cuts=self.capacity_cuts,
-                time_flow=self.time_flow, cover_cuts=self.cover_cuts))
+            # Every MilpOptions field is a setting of this method under the same name.
+            options = MilpOptions(**{f.name: getattr(self, f.name) for f in fields(MilpOptions)})
+            model = build_milp(instance, state.visible, state.committed, options)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

@@ -124,24 +124,21 @@ from concurrent.futures import ProcessPoolExecutor
 
 def job(seed):
     from tsac_bench.formulations.cpsat import solve_cpsat_isolated
-    from tests_tiny import tiny_instance
-    return solve_cpsat_isolated(tiny_instance(seed)).stats["status"]
+    from tsac_bench.generator import generate
+    return solve_cpsat_isolated(generate("2/4", seed)).stats["status"]
 
 if __name__ == "__main__":
     with ProcessPoolExecutor(1) as pool:
-        print(list(pool.map(job, [0])))
+        print(list(pool.map(job, [1])))
 """
 
 
 def test_cpsat_inside_a_worker_process_lets_it_exit(tmp_path) -> None:
     # A worker that used CP-SAT once used to hang at exit: multiprocessing joined the idle
     # CP-SAT process before any atexit hook could shut its pool down.
-    import shutil
     import subprocess
     import sys
-    from pathlib import Path
 
-    shutil.copy(Path(__file__).with_name("tiny.py"), tmp_path / "tests_tiny.py")
     script = tmp_path / "run.py"
     script.write_text(WORKER_SCRIPT)
     done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,

@@ -56,6 +56,24 @@ def test_unknown_method_exit_2(data_dir):
     assert "unknown method 'nope'" in result.output
 
 
+def test_set_values_are_read_as_json_where_they_parse():
+    from tsac_bench.cli import parse_settings
+
+    assert parse_settings(["threads=2", "warm_start=false", "rel_gap=0.5", "name=abc"]) == {
+        "threads": 2, "warm_start": False, "rel_gap": 0.5, "name": "abc"}
+
+
+def test_solve_passes_settings_and_names_an_unknown_one(data_dir):
+    result = invoke("solve", data_dir / "hand.json", "--method", "exact", "--set", "threads=2",
+                    "--set", "cover_cuts=false")
+    assert result.exit_code == 0, result.output
+    result = invoke("solve", data_dir / "hand.json", "--method", "exact", "--set", "thread=2")
+    assert result.exit_code == 2
+    assert "method 'exact' has no setting 'thread'; its settings: time_limit, threads" \
+        in result.output
+    assert invoke("solve", data_dir / "hand.json", "--set", "threads").exit_code == 2
+
+
 def test_solve_writes_a_solution_that_evaluates_to_the_printed_J(tmp_path, data_dir):
     out = tmp_path / "greedy.json"
     result = invoke("solve", data_dir / "hand.json", "--method", "greedy", "--out", out)

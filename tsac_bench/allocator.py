@@ -210,4 +210,15 @@ def allocator_class(name: str) -> Callable[..., Allocator]:
 
 
 def make_allocator(name: str, **settings: Any) -> Allocator:
-    return allocator_class(name)(**settings)
+    """The method ``name`` built with ``settings`` (its constructor keywords); a name the
+    constructor does not take is a one-line error listing the ones it does."""
+    cls = allocator_class(name)
+    parameters = inspect.signature(cls).parameters.values()
+    accepted = [p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD,
+                                                         p.KEYWORD_ONLY)]
+    takes_any = any(p.kind == p.VAR_KEYWORD for p in parameters)
+    unknown = sorted(set(settings) - set(accepted))
+    if unknown and not takes_any:
+        raise TsacBenchError(f"method {name!r} has no setting {unknown[0]!r}; its settings: "
+                             f"{', '.join(accepted) or 'none'}")
+    return cls(**settings)

@@ -141,6 +141,20 @@ def _print_breakdown(result: Any) -> None:
                   f"{terms['time']:.4f} + w3*op {terms['op']:.4f})")
 
 
+def parse_settings(pairs: list[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` pairs as keywords; a VALUE that is not JSON stays a string."""
+    settings: dict[str, Any] = {}
+    for pair in pairs:
+        name, sep, text = pair.partition("=")
+        if not sep or not name.strip():
+            raise TsacBenchError(f"--set {pair!r}: expected NAME=VALUE")
+        try:
+            settings[name.strip()] = json.loads(text)
+        except json.JSONDecodeError:
+            settings[name.strip()] = text
+    return settings
+
+
 @app.command()
 @user_errors
 def solve(
@@ -154,6 +168,10 @@ def solve(
     out: Annotated[Path | None, typer.Option(help="write the solution JSON here")] = None,
     polish: Annotated[bool, typer.Option("--polish", help="re-optimise the payload amounts "
                                          "of the routes found (cvxpy + HiGHS)")] = False,
+    setting: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="NAME=VALUE", help="a setting of the method (its constructor "
+        "keyword), repeatable; VALUE is read as JSON where it parses, e.g. --set threads=2")]
+    = None,
 ) -> None:
     """Run one method on one instance and print J (dynamic: also J after each re-plan).
 
@@ -162,7 +180,8 @@ def solve(
     from tsac_bench.solve import solve as run_solve
 
     instance = read_instance(instance_path)
-    outcome = run_solve(instance, method, seed=seed, time_limit=time_limit, mode=mode)
+    outcome = run_solve(instance, method, seed=seed, time_limit=time_limit, mode=mode,
+                        settings=parse_settings(setting or []))
     solution = outcome.solution
     if mode == "dynamic":
         table = Table("t (s)", "released", "visible", "committed", "J known before",

@@ -63,10 +63,13 @@ def test_set_values_are_read_as_json_where_they_parse():
         "threads": 2, "warm_start": False, "rel_gap": 0.5, "name": "abc"}
 
 
-def test_solve_passes_settings_and_names_an_unknown_one(data_dir):
+def test_solve_passes_settings_and_names_an_unknown_one(tmp_path, data_dir):
+    out = tmp_path / "exact.json"
     result = invoke("solve", data_dir / "hand.json", "--method", "exact", "--set", "threads=2",
-                    "--set", "cover_cuts=false")
+                    "--set", "cover_cuts=false", "--out", out)
     assert result.exit_code == 0, result.output
+    settings = json.loads(out.read_text())["meta"]["settings"]
+    assert settings["threads"] == 2 and settings["cover_cuts"] is False
     result = invoke("solve", data_dir / "hand.json", "--method", "exact", "--set", "thread=2")
     assert result.exit_code == 2
     assert "method 'exact' has no setting 'thread'; its settings: time_limit, threads" \

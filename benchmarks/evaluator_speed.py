@@ -13,10 +13,10 @@ import statistics
 import timeit
 from pathlib import Path
 
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
-from tsac_bench.insertion import removal_route
-from tsac_bench.solve import solve
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.planning.insertion import removal_route
+from tsac_bench.planning.solve import solve
 
 
 def median_seconds(call, repeat: int = 7, number: int = 200) -> float:

@@ -15,9 +15,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from tsac_bench.formulations.regression import prove
-from tsac_bench.generator import ScenarioGenerator
-from tsac_bench.io import write_instance
+from tsac_bench.batch.verify import prove
+from tsac_bench.model.generator import ScenarioGenerator
+from tsac_bench.model.io import write_instance
 
 ROOT = Path(__file__).resolve().parent.parent
 #: (AAVs, tasks, seeds): static instances (all tasks at t = 0) and instances with releases.

@@ -24,11 +24,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from tsac_bench.allocator import PlanningState
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.formulations.network import START
-from tsac_bench.generator import generate
 from tsac_bench.model import Instance
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.planning import PlanningState
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 ROOT = Path(__file__).resolve().parent.parent

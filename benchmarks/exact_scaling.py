@@ -22,8 +22,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from tsac_bench.generator import generate
-from tsac_bench.solve import solve
+from tsac_bench.model.generator import generate
+from tsac_bench.planning.solve import solve
 
 ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ("exact", "exact-cpsat")

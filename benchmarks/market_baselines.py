@@ -15,8 +15,8 @@ import statistics
 import sys
 from pathlib import Path
 
-from tsac_bench.generator import PAPER_SCALES, generate
-from tsac_bench.solve import solve
+from tsac_bench.model.generator import PAPER_SCALES, generate
+from tsac_bench.planning.solve import solve
 
 
 def main() -> None:

@@ -4,7 +4,7 @@
 Goal (issue 4): a 32/80 allocation within 5 s on one core; rocf and hocf below greedy's J on
 average. Run by hand, pinned to one core:
     python benchmarks/ocf_speed.py [--instances 5] [--first-seed 100]
-Writes reports/ocf-speed.md. Instances are generated (tsac_bench.generator, default
+Writes reports/ocf-speed.md. Instances are generated (tsac_bench.model.generator, default
 settings) with seeds first-seed .. first-seed + instances - 1; the method seed is 0.
 """
 
@@ -16,8 +16,8 @@ import platform
 import statistics
 from pathlib import Path
 
-from tsac_bench.generator import generate
-from tsac_bench.solve import solve
+from tsac_bench.model.generator import generate
+from tsac_bench.planning.solve import solve
 
 SCALES = ("16/40", "32/80")
 #: (label, method, settings): the defaults, then the OCF games started from greedy's plan.

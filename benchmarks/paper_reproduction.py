@@ -24,8 +24,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from tsac_bench.report import load, per_instance, scale_order, write_report
-from tsac_bench.runner import RunConfig, run_batch
+from tsac_bench.batch.runner import RunConfig, run_batch
+from tsac_bench.reporting.report import load, per_instance, scale_order, write_report
 
 ROOT = Path(__file__).resolve().parent.parent
 SETS = ROOT / "instances" / "paper-mc"
@@ -45,7 +45,7 @@ def instance_files(scale: str, count: int) -> list[Path]:
 
 
 def run(args: argparse.Namespace) -> None:
-    from tsac_bench.allocator import available_methods
+    from tsac_bench.planning import available_methods
 
     present = set(available_methods())
     heuristics = [m for m in (*PAPER_METHODS, *OUR_METHODS) if m in present]

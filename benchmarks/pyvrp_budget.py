@@ -18,9 +18,9 @@ from pathlib import Path
 import pandas as pd
 from paper_reproduction import instance_files  # a sibling script: benchmarks/ is sys.path[0]
 
-from tsac_bench.io import read_instance
-from tsac_bench.report import load
-from tsac_bench.solve import solve
+from tsac_bench.model.io import read_instance
+from tsac_bench.planning.solve import solve
+from tsac_bench.reporting.report import load
 from tsac_bench.solvers.pyvrp_peer import PyVRPAllocator
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -19,8 +19,8 @@ import statistics
 import time
 from pathlib import Path
 
-from tsac_bench.generator import generate
-from tsac_bench.solve import solve
+from tsac_bench.model.generator import generate
+from tsac_bench.planning.solve import solve
 
 SCALES = ("16/40", "32/80")
 

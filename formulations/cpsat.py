@@ -30,8 +30,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import CostEvaluator
 
 
 @dataclass(frozen=True)
@@ -326,7 +326,7 @@ _POOL: Any = None
 
 
 def _worker_solve(instance_data: dict, tasks: list[int] | None, kwargs: dict) -> CpsatOutcome:
-    from tsac_bench.io import instance_from_dict
+    from tsac_bench.model.io import instance_from_dict
 
     return solve_cpsat(instance_from_dict(instance_data), tasks, **kwargs)
 
@@ -338,7 +338,7 @@ def solve_cpsat_isolated(instance: Instance, tasks: Sequence[int] | None = None,
     import multiprocessing.util
     from concurrent.futures import ProcessPoolExecutor
 
-    from tsac_bench.io import instance_to_dict
+    from tsac_bench.model.io import instance_to_dict
 
     global _POOL
     if _POOL is None:

@@ -20,7 +20,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.formulations.network import (
     DIRECT,
     START,
@@ -36,6 +35,7 @@ from tsac_bench.formulations.network import (
     prefix_arrivals,
 )
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import CostEvaluator
 
 
 @dataclass

@@ -30,8 +30,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator
 
 #: The start node of an AAV in the networks below (tasks are 0..M-1).
 START = -1

@@ -25,9 +25,9 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.errors import InvalidSetting
-from tsac_bench.evaluator import (
+from tsac_bench.model import Route
+from tsac_bench.model.evaluator import (
     TIME_TOLERANCE,
     Contribution,
     CostEvaluator,
@@ -35,8 +35,8 @@ from tsac_bench.evaluator import (
     Proposal,
     RouteTrace,
 )
-from tsac_bench.insertion import best_insertion
-from tsac_bench.model import Route
+from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning.insertion import best_insertion
 
 #: A bid must lower J by more than float noise to count.
 PRICE_TOLERANCE = 1e-9

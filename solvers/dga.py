@@ -12,7 +12,7 @@ depot (a reload/unload stop). The committed prefix is fixed and not part of the 
 Fitness is the evaluator's J of the decoded routes (lower is better).
 
 Operators keep every individual feasible: genes move only through the insertion and removal
-edits of ``tsac_bench.insertion``, whose results the evaluator checks, and every child is
+edits of ``tsac_bench.planning.insertion``, whose results the evaluator checks, and every child is
 repaired by re-inserting whatever demand it leaves uncovered.
 * Crossover (route exchange, after Ombuki et al.'s best-cost route crossover): the child is
   parent A with one AAV's gene string taken from parent B; visits elsewhere that the
@@ -38,11 +38,11 @@ from typing import Any
 
 import numpy as np
 
-from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.errors import InvalidSetting
-from tsac_bench.evaluator import CostEvaluator, PlanState
-from tsac_bench.insertion import best_insertion, removal_route
 from tsac_bench.model import Route, Visit
+from tsac_bench.model.evaluator import CostEvaluator, PlanState
+from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning.insertion import best_insertion, removal_route
 
 #: A change must lower J by more than float noise to count as an improvement.
 GAIN_TOLERANCE = 1e-9

@@ -19,9 +19,9 @@ import time
 from dataclasses import fields
 from typing import Any
 
-from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import PlanningState, PlanResult, Settings
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 #: The evaluator's J and an optimal solver's objective agree to this relative tolerance.

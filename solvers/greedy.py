@@ -14,9 +14,9 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable
 
-from tsac_bench.allocator import PlanningState, PlanResult, Settings
-from tsac_bench.evaluator import CostEvaluator, PlanState
-from tsac_bench.insertion import best_insertion
+from tsac_bench.model.evaluator import CostEvaluator, PlanState
+from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning.insertion import best_insertion
 
 
 def insert_cheapest(plan: PlanState, state: PlanningState, tasks: Iterable[int],

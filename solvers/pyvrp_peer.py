@@ -26,10 +26,10 @@ from importlib.metadata import version
 
 import pyvrp
 
-from tsac_bench.allocator import PlanningState, PlanResult, Settings
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.insertion import removal_route, top_up
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning.insertion import removal_route, top_up
 from tsac_bench.solvers.greedy import deadline_order, insert_cheapest
 
 #: PyVRP works in integers: seconds * TIME_SCALE and cost * COST_SCALE.

@@ -2,8 +2,8 @@ from pathlib import Path
 
 import pytest
 
-from tsac_bench.io import read_instance
 from tsac_bench.model import Instance
+from tsac_bench.model.io import read_instance
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).parent.parent

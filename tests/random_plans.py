@@ -3,8 +3,8 @@ the evaluator allows it and a coin says so, else starts a trip of its own."""
 
 import numpy as np
 
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import CostEvaluator
 
 
 def random_route(instance: Instance, n: int, rng: np.random.Generator,

@@ -7,8 +7,8 @@ docs/model.md walks through the multi-trip case.
 import pytest
 from builders import plan
 
-from tsac_bench.evaluator import CostEvaluator, InfeasibleSolution
 from tsac_bench.model import Solution
+from tsac_bench.model.evaluator import CostEvaluator, InfeasibleSolution
 
 UNSERVED = 110.0
 
@@ -68,7 +68,7 @@ def test_range_exceedance_charges_the_full_range_cost(hand):
 
 
 def test_multi_trip_reload(hand, data_dir):
-    from tsac_bench.io import read_solution
+    from tsac_bench.model.io import read_solution
 
     solution = read_solution(data_dir / "hand-solution.json", hand)
     result = CostEvaluator(hand).evaluate(solution)

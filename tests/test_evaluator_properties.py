@@ -6,9 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from random_plans import random_plan, random_route
 
-from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator
-from tsac_bench.generator import generate
 from tsac_bench.model import Solution
+from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator
+from tsac_bench.model.generator import generate
 
 scales = st.sampled_from(["2/4", "4/10", "8/20"])
 seeds = st.integers(0, 10_000)

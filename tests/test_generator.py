@@ -1,7 +1,13 @@
 import pytest
 
-from tsac_bench.generator import AAV_TYPES, PAPER_SCALES, ScenarioGenerator, generate, parse_scale
-from tsac_bench.io import instance_to_dict
+from tsac_bench.model.generator import (
+    AAV_TYPES,
+    PAPER_SCALES,
+    ScenarioGenerator,
+    generate,
+    parse_scale,
+)
+from tsac_bench.model.io import instance_to_dict
 
 
 def test_same_seed_same_instance_other_seed_other_instance():

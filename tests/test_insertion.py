@@ -3,9 +3,9 @@
 import pytest
 from builders import plan
 
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.insertion import best_insertion, max_amount, removal_route, top_up
 from tsac_bench.model import Visit
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning.insertion import best_insertion, max_amount, removal_route, top_up
 
 
 def test_max_amount_is_the_capacity_slack_where_the_goods_ride(hand):

@@ -3,8 +3,9 @@ import json
 import pytest
 
 from tsac_bench.errors import InputError
-from tsac_bench.generator import generate
-from tsac_bench.io import (
+from tsac_bench.model import Solution
+from tsac_bench.model.generator import generate
+from tsac_bench.model.io import (
     instance_from_dict,
     instance_to_dict,
     read_instance,
@@ -13,7 +14,6 @@ from tsac_bench.io import (
     write_instance,
     write_solution,
 )
-from tsac_bench.model import Solution
 
 
 @pytest.mark.parametrize(
@@ -115,7 +115,7 @@ def test_instances_and_solutions_pickle_for_worker_processes(hand):
 
 
 def test_a_walk_skips_sweep_sets_unless_they_are_named(tmp_path, hand):
-    from tsac_bench.io import SWEEP_MARKER, iter_instance_files, sweep_sets_below
+    from tsac_bench.model.io import SWEEP_MARKER, iter_instance_files, sweep_sets_below
 
     for folder in ("quick", "big"):
         write_instance(hand, tmp_path / folder / "hand.json")

@@ -6,12 +6,12 @@ from dataclasses import replace
 
 import pytest
 
-from tsac_bench.allocator import PlanningState, PlanResult
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
 from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind, Visit
-from tsac_bench.simulator import InvalidPlan, committed_prefixes, simulate
-from tsac_bench.solve import solve
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.planning import PlanningState, PlanResult
+from tsac_bench.planning.simulator import InvalidPlan, committed_prefixes, simulate
+from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 HEAVY = dict(speed=10.0, capacity=30, max_range=60_000.0, alpha=20.0, lam=2000.0)
@@ -162,7 +162,7 @@ def test_a_replan_that_breaks_a_rule_stops_the_run(cheat, message):
 
 @pytest.mark.parametrize("method", ["greedy", "rocf", "hocf"])
 def test_every_replan_keeps_every_earlier_prefix(method):
-    from tsac_bench.allocator import make_allocator
+    from tsac_bench.planning import make_allocator
 
     instance = generate("8/20", seed=5)
     recorder = Recording(make_allocator(method))
@@ -180,7 +180,7 @@ def test_every_replan_keeps_every_earlier_prefix(method):
 
 @pytest.mark.parametrize("method", ["greedy", "rocf", "hocf"])
 def test_static_mode_is_one_plan_call(method):
-    from tsac_bench.allocator import make_allocator
+    from tsac_bench.planning import make_allocator
 
     instance = generate("8/20", seed=4)
     direct = make_allocator(method).plan(PlanningState.static(instance), seed=3)

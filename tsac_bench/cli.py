@@ -14,8 +14,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from tsac_bench.batch.worker import GRACE_SECONDS
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.worker import GRACE_SECONDS
 
 app = typer.Typer(
     name="tsac-bench",
@@ -61,8 +61,8 @@ def generate(
     out: Annotated[Path, typer.Option(help="output directory")] = Path("instances/generated"),
 ) -> None:
     """Generate instances of the paper's scenario family (deterministic per seed)."""
-    from tsac_bench.generator import ScenarioGenerator, parse_scale
-    from tsac_bench.io import write_instance
+    from tsac_bench.model.generator import ScenarioGenerator, parse_scale
+    from tsac_bench.model.io import write_instance
 
     try:
         n, m = parse_scale(scale)
@@ -79,7 +79,7 @@ def generate(
 @user_errors
 def info(instance_path: Annotated[Path, typer.Argument(metavar="INSTANCE")]) -> None:
     """Summarise an instance: fleet, depots, tasks and their windows."""
-    from tsac_bench.io import read_instance
+    from tsac_bench.model.io import read_instance
 
     instance = read_instance(instance_path)
     console.print(f"[bold]{instance.name}[/]  scale {instance.scale}, {instance.n_depots} "
@@ -104,8 +104,8 @@ def evaluate(
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
 ) -> None:
     """Check a solution and print J with its breakdown (exit 1 if infeasible)."""
-    from tsac_bench.evaluator import CostEvaluator
-    from tsac_bench.io import read_instance, read_solution
+    from tsac_bench.model.evaluator import CostEvaluator
+    from tsac_bench.model.io import read_instance, read_solution
 
     instance = read_instance(instance_path)
     solution = read_solution(solution_path, instance)
@@ -176,8 +176,8 @@ def solve(
     """Run one method on one instance and print J (dynamic: also J after each re-plan).
 
     --time-limit is the budget of each plan call."""
-    from tsac_bench.io import read_instance, write_solution
-    from tsac_bench.solve import solve as run_solve
+    from tsac_bench.model.io import read_instance, write_solution
+    from tsac_bench.planning.solve import solve as run_solve
 
     instance = read_instance(instance_path)
     outcome = run_solve(instance, method, seed=seed, time_limit=time_limit, mode=mode,
@@ -195,7 +195,7 @@ def solve(
     console.print(f"{instance.name}  {method}  {mode}  J = {outcome.cost:.6f}  "
                   f"({outcome.wall_time:.3f} s)")
     if polish:
-        from tsac_bench.polish import polish as polish_solution
+        from tsac_bench.planning.polish import polish as polish_solution
 
         solution = polish_solution(instance, solution)
         console.print(f"{instance.name}  {method}+polish  J = {solution.cost:.6f}")
@@ -216,8 +216,8 @@ def verify(
     threads: Annotated[int, typer.Option(min=1)] = 1,
 ) -> None:
     """Re-solve a directory's instances and compare with its manifest (exit 1 on failure)."""
-    from tsac_bench.formulations.regression import BACKENDS
-    from tsac_bench.formulations.regression import verify as run_verify
+    from tsac_bench.batch.verify import BACKENDS
+    from tsac_bench.batch.verify import verify as run_verify
 
     checks = run_verify(directory, tuple(method or BACKENDS), time_limit, only, threads)
     table = Table("instance", "method", "J*", "J", "lower bound", "status", "time (s)",
@@ -238,7 +238,7 @@ def verify(
 @user_errors
 def methods() -> None:
     """List the registered methods (built-in and plug-ins)."""
-    from tsac_bench.allocator import (
+    from tsac_bench.planning import (
         MethodUnavailable,
         allocator_class,
         available_methods,
@@ -293,7 +293,7 @@ def run(
     """Run every (instance, method, mode, seed) job; resumes an interrupted run in --out."""
     import os
 
-    from tsac_bench.runner import RunConfig, run_batch
+    from tsac_bench.batch.runner import RunConfig, run_batch
 
     config = RunConfig(
         paths=list(paths), out=out, seeds=seeds, time_limit=time_limit, mode=mode,
@@ -306,7 +306,7 @@ def run(
     console.print(f"{outcome.ran} job(s) run, {outcome.skipped} already recorded, "
                   f"{outcome.failed} failed; results in {out}")
     if report:
-        from tsac_bench.report import write_report
+        from tsac_bench.reporting.report import write_report
 
         index = write_report(out, report_out or Path("reports") / out.name)
         console.print(f"report: {index}")
@@ -316,7 +316,7 @@ def run(
 
 
 def _print_summary(run_dir: Path) -> None:
-    from tsac_bench.report import below_reference, load, summary
+    from tsac_bench.reporting.report import below_reference, load, summary
 
     frame = load(run_dir)
     if frame.empty:
@@ -348,7 +348,7 @@ def results_export(
                                              "FORMAT)")] = None,
 ) -> None:
     """Export a run's jobs table (one row per job) as Parquet or CSV."""
-    from tsac_bench.store import export
+    from tsac_bench.batch.store import export
 
     target = out or run_dir / f"results.{fmt}"
     count = export(run_dir, fmt, target)
@@ -359,7 +359,7 @@ def results_export(
 @user_errors
 def results_summary(run_dir: Annotated[Path, typer.Argument(metavar="RUN_DIR")]) -> None:
     """Print a run's summary table (mean J and mean gap per mode, scale and method)."""
-    from tsac_bench.store import ResultStore
+    from tsac_bench.batch.store import ResultStore
 
     ResultStore(run_dir, create=False).close()
     _print_summary(run_dir)
@@ -373,7 +373,7 @@ def report_command(
                                              "of RUN_DIR>)")] = None,
 ) -> None:
     """Write tables (LaTeX, Markdown), statistics and figures of a run, with an index.md."""
-    from tsac_bench.report import write_report
+    from tsac_bench.reporting.report import write_report
 
     index = write_report(run_dir, out or Path("reports") / run_dir.name)
     console.print(f"report: {index}")
@@ -405,8 +405,8 @@ def train(
         TimeRemainingColumn,
     )
 
-    from tsac_bench.solvers.tsac_sac import TrainConfig, resolve_device
-    from tsac_bench.solvers.tsac_sac import train as run_training
+    from tsac_bench.solvers.tsac.sac import TrainConfig, resolve_device
+    from tsac_bench.solvers.tsac.sac import train as run_training
 
     torch.set_num_threads(threads)
     if resume is not None and not resume.is_file():

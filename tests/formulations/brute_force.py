@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator
 
 
 @dataclass

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import random
 
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.insertion import best_insertion
 from tsac_bench.model import Instance, Route
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning.insertion import best_insertion
 
 
 def random_plan(instance: Instance, seed: int) -> tuple[Route, ...]:

@@ -14,7 +14,6 @@ from brute_force import brute_force
 from plans import random_plan
 from tiny import tiny_instance
 
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.formulations.cpsat import solve_cpsat_isolated
 from tsac_bench.formulations.milp import (
     build_milp,
@@ -24,6 +23,7 @@ from tsac_bench.formulations.milp import (
     violated_constraints,
 )
 from tsac_bench.formulations.network import canonical_routes
+from tsac_bench.model.evaluator import CostEvaluator
 
 pyo = pytest.importorskip("pyomo.environ")
 
@@ -124,7 +124,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 def job(seed):
     from tsac_bench.formulations.cpsat import solve_cpsat_isolated
-    from tsac_bench.generator import generate
+    from tsac_bench.model.generator import generate
     return solve_cpsat_isolated(generate("2/4", seed)).stats["status"]
 
 if __name__ == "__main__":

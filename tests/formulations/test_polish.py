@@ -8,9 +8,9 @@ import pytest
 from plans import random_plan
 from tiny import tiny_instance
 
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.model import Solution, Visit
-from tsac_bench.polish import polish, polish_routes
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning.polish import polish, polish_routes
 
 pytest.importorskip("cvxpy")
 

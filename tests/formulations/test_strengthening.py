@@ -8,7 +8,7 @@ import itertools
 import pytest
 
 from tsac_bench.formulations.network import coalition_cover_cuts
-from tsac_bench.generator import generate
+from tsac_bench.model.generator import generate
 
 pyo = pytest.importorskip("pyomo.environ")
 

@@ -11,7 +11,7 @@ from pathlib import Path
 ROOT = Path(__file__).parents[2]
 
 PLUGIN = '''
-from tsac_bench.allocator import PlanResult, Settings
+from tsac_bench.planning import PlanResult, Settings
 
 
 class Idle(Settings):

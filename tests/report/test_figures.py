@@ -6,11 +6,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.io import read_instance, read_solution, write_solution
+from tsac_bench.batch.store import ResultStore, job_key
 from tsac_bench.model import Solution
-from tsac_bench.report import coalition_sizes, write_report
-from tsac_bench.store import ResultStore, job_key
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.io import read_instance, read_solution, write_solution
+from tsac_bench.reporting.report import coalition_sizes, write_report
 
 pytest.importorskip("matplotlib")
 
@@ -81,8 +81,8 @@ def test_gantt_without_replans_is_drawn_with_a_note(run_dir, tmp_path):
         for row in store.rows():
             if row["mode"] == "dynamic":
                 store.record({**row, "stats": {}})
-    from tsac_bench.figures import dynamic_gantt
-    from tsac_bench.report import SolutionLoader
+    from tsac_bench.reporting.figures import dynamic_gantt
+    from tsac_bench.reporting.report import SolutionLoader
 
     with ResultStore(run_dir) as store:
         frame = store.frame()
@@ -99,7 +99,7 @@ def _b_cost() -> float:
 
 
 def test_the_replan_curve_jumps_at_releases_and_drops_with_the_replan():
-    from tsac_bench.figures import replan_curve
+    from tsac_bench.reporting.figures import replan_curve
 
     stats = {"replans": [
         {"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
@@ -113,7 +113,7 @@ def test_the_replan_curve_jumps_at_releases_and_drops_with_the_replan():
 
 
 def test_gantt_lanes_and_cost_panel():
-    from tsac_bench.figures import gantt_figure, replan_curve
+    from tsac_bench.reporting.figures import gantt_figure, replan_curve
 
     instance = read_instance(HAND)
     solution = read_solution(HAND_SOLUTION, instance)

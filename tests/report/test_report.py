@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tsac_bench.report import (
+from tsac_bench.batch.store import ResultStore, job_key
+from tsac_bench.reporting.report import (
     below_reference,
     comparisons,
     holm,
@@ -18,7 +19,6 @@ from tsac_bench.report import (
     references,
     write_report,
 )
-from tsac_bench.store import ResultStore, job_key
 
 DATA = Path(__file__).parent.parent / "data"
 

@@ -17,7 +17,7 @@ PLUGIN_SOURCE = '''
 import os
 import time
 
-from tsac_bench.allocator import PlanResult, Settings
+from tsac_bench.planning import PlanResult, Settings
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 

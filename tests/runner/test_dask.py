@@ -2,8 +2,8 @@ import json
 
 import pytest
 
-from tsac_bench.runner import RunConfig, run_batch
-from tsac_bench.store import ResultStore
+from tsac_bench.batch.runner import RunConfig, run_batch
+from tsac_bench.batch.store import ResultStore
 
 pytest.importorskip("distributed")
 

@@ -9,13 +9,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from tsac_bench.batch.runner import RunConfig, run_batch
+from tsac_bench.batch.store import ResultStore, export
+from tsac_bench.batch.worker import execute_job
 from tsac_bench.errors import UnknownMethodError
-from tsac_bench.io import read_instance, read_solution
-from tsac_bench.report import per_instance
-from tsac_bench.runner import RunConfig, run_batch
-from tsac_bench.solve import solve
-from tsac_bench.store import ResultStore, export
-from tsac_bench.worker import execute_job
+from tsac_bench.model.io import read_instance, read_solution
+from tsac_bench.planning.solve import solve
+from tsac_bench.reporting.report import per_instance
 
 COMPARED = ["key", "instance", "scale", "method", "mode", "seed", "status", "J", "J_load",
             "J_time", "J_op", "solution_file"]
@@ -135,7 +135,7 @@ def test_an_unknown_method_is_one_line_and_runs_nothing(tmp_path, two_instances,
 
 def test_an_unknown_mode_is_a_recorded_error(two_instances):
     instance = read_instance(two_instances / "quick-2-4-s1.json")
-    from tsac_bench.io import instance_to_dict
+    from tsac_bench.model.io import instance_to_dict
 
     result = execute_job({"instance": instance_to_dict(instance), "method": "greedy",
                           "mode": "sideways", "seed": 0, "time_limit": 1})
@@ -194,7 +194,7 @@ def test_export_csv_and_parquet_hold_every_row(tmp_path, two_instances):
 
 
 def test_default_time_limits_grow_with_the_task_count():
-    from tsac_bench.runner import default_time_limit
+    from tsac_bench.batch.runner import default_time_limit
 
     assert default_time_limit("greedy", 4) == 2.0
     assert default_time_limit("greedy", 80) == 16.0

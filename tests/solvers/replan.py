@@ -1,10 +1,10 @@
 """Hand-built dynamic planning states for the market baselines' tests: what a re-plan at time
 ``t`` sees after a plan made earlier (the simulator's own committed-prefix rule)."""
 
-from tsac_bench.allocator import PlanningState
-from tsac_bench.evaluator import CostEvaluator
 from tsac_bench.model import Instance, Route
-from tsac_bench.simulator import committed_prefixes
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import PlanningState
+from tsac_bench.planning.simulator import committed_prefixes
 
 
 def replan_state(instance: Instance, routes: tuple[Route, ...], t: float) -> PlanningState:

@@ -2,9 +2,9 @@
 
 from pathlib import Path
 
-from tsac_bench.generator import AAV_TYPES
-from tsac_bench.io import read_instance
 from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind
+from tsac_bench.model.generator import AAV_TYPES
+from tsac_bench.model.io import read_instance
 
 ROOT = Path(__file__).parents[2]
 

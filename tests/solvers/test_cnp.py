@@ -3,13 +3,13 @@ import math
 import pytest
 from replan import replan_state
 
-from tsac_bench.allocator import PlanningState
 from tsac_bench.errors import InvalidSetting
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
-from tsac_bench.io import instance_from_dict
 from tsac_bench.model import Instance, Visit
-from tsac_bench.solve import solve
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.model.io import instance_from_dict
+from tsac_bench.planning import PlanningState
+from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.cnp import ContractNetAllocator, ContractNetManager
 
 # Type-2 AAVs of TABLE 1: 20 m/s, 10 kg, 30 km, alpha 10; E_base = 10 * 30 + 500 = 800.

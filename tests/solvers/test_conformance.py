@@ -8,16 +8,16 @@ gets ``TIME_LIMIT`` seconds, so that the exact solvers take part too.
 import pytest
 from solver_cases import edge_cases, paper_x20, quick
 
-from tsac_bench.allocator import (
+from tsac_bench.errors import TsacBenchError
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.io import read_solution, write_solution
+from tsac_bench.planning import (
     MethodUnavailable,
     allocator_class,
     available_methods,
     supported_modes,
 )
-from tsac_bench.errors import TsacBenchError
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.io import read_solution, write_solution
-from tsac_bench.solve import SolveOutcome, solve
+from tsac_bench.planning.solve import SolveOutcome, solve
 
 TIME_LIMIT = 2.0
 METHODS = available_methods()

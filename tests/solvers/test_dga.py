@@ -3,13 +3,13 @@ import itertools
 import pytest
 from replan import replan_state
 
-from tsac_bench.allocator import PlanningState
 from tsac_bench.errors import InvalidSetting
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
-from tsac_bench.io import instance_from_dict
 from tsac_bench.model import Visit
-from tsac_bench.solve import solve
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.model.io import instance_from_dict
+from tsac_bench.planning import PlanningState
+from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.dga import DGAAllocator
 
 SMALL = {"islands": 2, "population": 4, "generations": 6, "migration_interval": 3}

@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from tsac_bench.allocator import MethodUnavailable, PlanningState, available_methods
 from tsac_bench.cli import app
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.io import read_instance
-from tsac_bench.solve import solve
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.io import read_instance
+from tsac_bench.planning import MethodUnavailable, PlanningState, available_methods
+from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.exact import CpSatAllocator, ExactAllocator
 from tsac_bench.solvers.greedy import GreedyAllocator
 
@@ -165,8 +165,8 @@ def test_solve_with_polish_prints_both_costs(tmp_path: Path) -> None:
 def test_exact_lets_another_aav_join_a_task_committed_in_a_prefix():
     # A0 has committed 10 of T0's 20 kg (it is flying there); the rest is A1's to bring.
     # Both arrive at 50 s; E_base = 10 * 30 + 500 = 800, each leg of 1 km costs 10 / 800.
-    from tsac_bench.allocator import PlanningState
     from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind, Visit
+    from tsac_bench.planning import PlanningState
     from tsac_bench.solvers.exact import ExactAllocator
 
     fast = {"speed": 20, "capacity": 10, "max_range": 30000, "alpha": 10, "lam": 500}

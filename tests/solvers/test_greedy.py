@@ -1,10 +1,10 @@
 import pytest
 
-from tsac_bench.allocator import PlanningState
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
 from tsac_bench.model import Solution, Visit
-from tsac_bench.solve import solve
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.planning import PlanningState
+from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 

@@ -1,4 +1,4 @@
-"""The OCF game engine (solvers/ocf.py) and its two selection rules, rocf and hocf."""
+"""The OCF game engine (solvers/ocf/engine.py) and its two selection rules, rocf and hocf."""
 
 import itertools
 
@@ -6,15 +6,14 @@ import numpy as np
 import pytest
 from solver_cases import DEPOTS, aav, edge_cases, paper_x20, quick, task
 
-from tsac_bench.allocator import PlanningState, make_allocator
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
-from tsac_bench.insertion import best_insertion, removal_route
 from tsac_bench.model import Instance, Visit
-from tsac_bench.simulator import simulate
-from tsac_bench.solve import solve
-from tsac_bench.solvers.hocf import HeuristicSelection
-from tsac_bench.solvers.ocf import (
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.planning import PlanningState, make_allocator
+from tsac_bench.planning.insertion import best_insertion, removal_route
+from tsac_bench.planning.simulator import simulate
+from tsac_bench.planning.solve import solve
+from tsac_bench.solvers.ocf.engine import (
     AGENT_FEATURES,
     DEPOT_FEATURES,
     STRICT_DECREASE,
@@ -23,7 +22,8 @@ from tsac_bench.solvers.ocf import (
     DecisionView,
     Move,
 )
-from tsac_bench.solvers.rocf import UniformSelection
+from tsac_bench.solvers.ocf.hocf import HeuristicSelection
+from tsac_bench.solvers.ocf.rocf import UniformSelection
 
 
 def rule_for(name, instance):

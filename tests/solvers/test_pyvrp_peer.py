@@ -2,11 +2,11 @@ import pytest
 
 pytest.importorskip("pyvrp")
 
-from tsac_bench.allocator import PlanningState
-from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator
-from tsac_bench.generator import generate
 from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind
-from tsac_bench.solve import solve
+from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.planning import PlanningState
+from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.pyvrp_peer import PyVRPAllocator, _Mapping
 
 

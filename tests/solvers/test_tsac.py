@@ -12,11 +12,11 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("gymnasium")
 
-from tsac_bench.allocator import PlanningState  # noqa: E402
-from tsac_bench.generator import generate  # noqa: E402
-from tsac_bench.solve import solve  # noqa: E402
-from tsac_bench.solvers.ocf import CoalitionGame, DecisionView  # noqa: E402
-from tsac_bench.solvers.tsac_env import (  # noqa: E402
+from tsac_bench.model.generator import generate  # noqa: E402
+from tsac_bench.planning import PlanningState  # noqa: E402
+from tsac_bench.planning.solve import solve  # noqa: E402
+from tsac_bench.solvers.ocf.engine import CoalitionGame, DecisionView  # noqa: E402
+from tsac_bench.solvers.tsac.env import (  # noqa: E402
     AGENT_DIM,
     DEPOT_DIM,
     TASK_DIM,
@@ -24,14 +24,14 @@ from tsac_bench.solvers.tsac_env import (  # noqa: E402
     TaskSelectionEnv,
     unpad,
 )
-from tsac_bench.solvers.tsac_net import NetConfig, PolicyNet, collate  # noqa: E402
-from tsac_bench.solvers.tsac_ocf import (  # noqa: E402
+from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate  # noqa: E402
+from tsac_bench.solvers.tsac.policy import (  # noqa: E402
     DEFAULT_POLICY,
     PolicyFileError,
     PolicySelection,
     load_policy,
 )
-from tsac_bench.solvers.tsac_sac import (  # noqa: E402
+from tsac_bench.solvers.tsac.sac import (  # noqa: E402
     Batch,
     DiscreteSAC,
     SACConfig,

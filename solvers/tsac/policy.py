@@ -1,11 +1,11 @@
 """``tsac-ocf``: the OCF game with a learned task-selection policy (paper Sec. III-C).
 
-The engine of ``solvers/ocf.py`` plays Algorithm 1 (random AAV permutations, ADD/REMOVE,
+The engine of ``solvers/ocf/engine.py`` plays Algorithm 1 (random AAV permutations, ADD/REMOVE,
 strict-improvement acceptance, tabu list); the selection rule here feeds the deciding AAV's
 state (Eq. 20, ``tsac_env.observe``) to a frozen transformer actor and samples the task from
 the masked distribution (Eq. 21) with the engine's seeded generator, so a run is
 deterministic per seed. The default policy ships with the package
-(``solvers/policies/tsac-default.pt``; how it was trained: docs/tsac.md).
+(``solvers/tsac/policies/tsac-default.pt``; how it was trained: docs/tsac.md).
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from tsac_bench.allocator import PlanningState, PlanResult
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
-from tsac_bench.solvers.tsac_env import observe
-from tsac_bench.solvers.tsac_net import NetConfig, PolicyNet, collate
+from tsac_bench.planning import PlanningState, PlanResult
+from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
+from tsac_bench.solvers.tsac.env import observe
+from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate
 
 DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
 POLICY_FORMAT = "tsac-bench/policy@1"

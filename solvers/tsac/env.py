@@ -24,11 +24,11 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
-from tsac_bench.allocator import PlanningState
-from tsac_bench.evaluator import TIME_TOLERANCE
-from tsac_bench.generator import ScenarioGenerator, parse_scale
 from tsac_bench.model import Instance
-from tsac_bench.solvers.ocf import (
+from tsac_bench.model.evaluator import TIME_TOLERANCE
+from tsac_bench.model.generator import ScenarioGenerator, parse_scale
+from tsac_bench.planning import PlanningState
+from tsac_bench.solvers.ocf.engine import (
     AGENT_FEATURES,
     DEPOT_FEATURES,
     TASK_FEATURES,

@@ -21,17 +21,17 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from tsac_bench.allocator import (
+from tsac_bench.batch.store import ResultStore, job_key
+from tsac_bench.batch.worker import GRACE_SECONDS, hard_timeout
+from tsac_bench.errors import InputError, TsacBenchError
+from tsac_bench.model import Instance
+from tsac_bench.model.io import sweep_sets_below
+from tsac_bench.planning import (
     MethodUnavailable,
     allocator_class,
     available_methods,
     supported_modes,
 )
-from tsac_bench.errors import InputError, TsacBenchError
-from tsac_bench.io import sweep_sets_below
-from tsac_bench.model import Instance
-from tsac_bench.store import ResultStore, job_key
-from tsac_bench.worker import GRACE_SECONDS, hard_timeout
 
 #: Methods that prove optimality; their static runs may supply J* (see ``report``).
 EXACT_METHODS = ("exact", "exact-cpsat")
@@ -128,7 +128,7 @@ def read_manifest(directory: Path) -> tuple[dict[str, Reference], list[str]]:
 def load_instances(paths: Sequence[Path]) -> tuple[list[LoadedInstance], list[str]]:
     """Every instance file under ``paths``; each unreadable file becomes one problem line
     (file and field) and the others load."""
-    from tsac_bench.io import instance_to_dict, iter_instance_files, read_instance
+    from tsac_bench.model.io import instance_to_dict, iter_instance_files, read_instance
 
     problems: list[str] = []
     for path in paths:
@@ -183,7 +183,7 @@ def resolve_methods(requested: Sequence[str] | None) -> tuple[list[str], list[st
 
 def resolve_modes(mode: str) -> list[str]:
     """``auto``: static, plus dynamic where this build's ``solve`` supports it."""
-    from tsac_bench.solve import MODES
+    from tsac_bench.planning.solve import MODES
 
     if mode == "auto":
         return [m for m in ("static", "dynamic") if m in MODES]
@@ -231,8 +231,8 @@ def record_result(store: ResultStore, job: Job, result: dict[str, Any]) -> str:
 
     The stored J is recomputed here by the evaluator from the solution as written to the file,
     so every stored cost is the evaluator's, whatever the worker claimed."""
-    from tsac_bench.evaluator import CostEvaluator
-    from tsac_bench.io import solution_from_dict, write_solution
+    from tsac_bench.model.evaluator import CostEvaluator
+    from tsac_bench.model.io import solution_from_dict, write_solution
 
     row = {**job.row, "status": result["status"], "message": result["message"],
            "detail": result.get("detail") or None, "runtime": result["runtime"],
@@ -276,7 +276,7 @@ class RunConfig:
 
 
 def execute(config: RunConfig, specs: list[dict[str, Any]]) -> Iterator[tuple[dict, dict]]:
-    from tsac_bench.executors import run_dask, run_local
+    from tsac_bench.batch.executors import run_dask, run_local
 
     if config.executor == "local":
         if config.scheduler is not None:

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator
 from tsac_bench.model import Instance, Route, Solution, Visit
+from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator
 
 
 def polish_routes(instance: Instance, routes: Sequence[Route]) -> tuple[Route, ...]:

@@ -26,7 +26,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from tsac_bench.report import (
+from tsac_bench.reporting.report import (
     OK,
     SolutionLoader,
     coalition_sizes,
@@ -207,7 +207,7 @@ def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[fl
                  title: str) -> Any:
     """Top: one lane per AAV, a bar per leg (flight solid, waiting for the window hatched),
     labelled with the node it reaches. Bottom (when the run has re-plans): its cost curve."""
-    from tsac_bench.evaluator import CostEvaluator
+    from tsac_bench.model.evaluator import CostEvaluator
 
     times, costs, cost_label = curve
     evaluator = CostEvaluator(instance)

@@ -34,8 +34,8 @@ def agree(a: float, b: float, tolerance: float = AGREEMENT) -> bool:
 def solve_exact(path: Path, method: str, time_limit: float | None, threads: int = 1,
                 seed: int = 0) -> dict[str, Any]:
     """One exact backend on one instance file; the stats of its PlanResult plus J."""
-    from tsac_bench.io import read_instance
-    from tsac_bench.solve import solve
+    from tsac_bench.model.io import read_instance
+    from tsac_bench.planning.solve import solve
 
     instance = read_instance(path)
     outcome = solve(instance, method, seed=seed, time_limit=time_limit,
@@ -89,7 +89,7 @@ def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
           names: Iterable[str] | None = None, log: Any = print) -> dict[str, Any]:
     """Solve every instance of ``directory`` with both backends and write the manifest
     (entries of instances not solved this time are kept)."""
-    from tsac_bench.io import iter_instance_files, read_instance
+    from tsac_bench.model.io import iter_instance_files, read_instance
 
     path = directory / MANIFEST
     manifest = read_manifest(directory) if path.exists() else {

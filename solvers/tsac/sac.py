@@ -34,11 +34,11 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from tsac_bench.allocator import PlanningState, make_allocator
-from tsac_bench.evaluator import CostEvaluator
-from tsac_bench.generator import generate
-from tsac_bench.solvers.ocf import CoalitionGame
-from tsac_bench.solvers.tsac_env import (
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.planning import PlanningState, make_allocator
+from tsac_bench.solvers.ocf.engine import CoalitionGame
+from tsac_bench.solvers.tsac.env import (
     AGENT_DIM,
     DEPOT_DIM,
     TASK_DIM,
@@ -46,8 +46,8 @@ from tsac_bench.solvers.tsac_env import (
     TaskSelectionEnv,
     unpad,
 )
-from tsac_bench.solvers.tsac_net import NetConfig, PolicyNet, QNet, collate, expectation
-from tsac_bench.solvers.tsac_ocf import PolicySelection, save_policy
+from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate, expectation
+from tsac_bench.solvers.tsac.policy import PolicySelection, save_policy
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 
-from tsac_bench.evaluator import TIME_TOLERANCE, PlanState, Proposal, RouteTrace
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import TIME_TOLERANCE, PlanState, Proposal, RouteTrace
 
 
 def insertion_routes(instance: Instance, n: int, route: Route, task: int, first_free: int = 0,

@@ -43,10 +43,10 @@ from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
-from tsac_bench.allocator import PlanningState, PlanResult, Settings
-from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator, PlanState, Proposal
-from tsac_bench.insertion import best_insertion, removal_route
 from tsac_bench.model import Route
+from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator, PlanState, Proposal
+from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning.insertion import best_insertion, removal_route
 
 #: A move must lower J by more than this to count as a strict decrease (Eq. 22): J is a sum
 #: of floats, and a "gain" below this is rounding, which could otherwise cycle.

@@ -1,5 +1,5 @@
-"""The ``Allocator`` protocol every method implements, the planning state it sees, and the
-registry that finds methods by name (built-ins and ``tsac_bench.allocators`` plug-ins).
+"""The ``Allocator`` protocol every method implements and the planning state it sees
+(the registry that finds methods by name is ``tsac_bench.planning.registry``).
 
 A method is a class whose constructor takes its settings as keywords (so that a run can be
 rebuilt from its record) and whose ``plan`` turns a ``PlanningState`` into one route per AAV.
@@ -7,17 +7,12 @@ rebuilt from its record) and whose ``plan`` turns a ``PlanningState`` into one r
 
 from __future__ import annotations
 
-import importlib
 import inspect
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
-from tsac_bench.errors import TsacBenchError, UnknownMethodError
 from tsac_bench.model import Instance, Route, Visit
-
-ENTRY_POINT_GROUP = "tsac_bench.allocators"
 
 
 @dataclass(frozen=True)
@@ -63,7 +58,7 @@ class PlanningState:
         incumbent route without its free visits to tasks no longer visible (depot visits made
         pointless dropped too); ``base_routes()`` for an AAV whose incumbent does not start
         with its committed prefix, and for every AAV when there is no incumbent."""
-        from tsac_bench.insertion import removal_route
+        from tsac_bench.planning.insertion import removal_route
 
         if self.incumbent is None:
             return self.base_routes()
@@ -110,7 +105,7 @@ class PlanResult:
     cost: float | None = None
 
 
-#: The planning modes of tsac_bench.solve; a method that declares ``modes`` plans only those.
+#: The planning modes; a method that declares ``modes`` plans only those.
 ALL_MODES = ("static", "dynamic")
 
 
@@ -137,88 +132,3 @@ class Settings:
     def settings(self) -> dict[str, Any]:
         names = [p for p in inspect.signature(type(self).__init__).parameters if p != "self"]
         return {name: getattr(self, name) for name in names}
-
-
-# --- registry ----------------------------------------------------------------------------
-#: Built-in methods by name, as "module:Class" so that listing them imports nothing heavy.
-BUILTIN_METHODS: dict[str, str] = {
-    "greedy": "tsac_bench.solvers.greedy:GreedyAllocator",
-    "hocf": "tsac_bench.solvers.hocf:HOCFAllocator",
-    "rocf": "tsac_bench.solvers.rocf:ROCFAllocator",
-    "dga": "tsac_bench.solvers.dga:DGAAllocator",
-    "cnp": "tsac_bench.solvers.cnp:ContractNetAllocator",
-    "exact": "tsac_bench.solvers.exact:ExactAllocator",
-    "exact-cpsat": "tsac_bench.solvers.exact:CpSatAllocator",
-    "tsac-ocf": "tsac_bench.solvers.tsac_ocf:TSACOCFAllocator",
-    "pyvrp": "tsac_bench.solvers.pyvrp_peer:PyVRPAllocator",
-}
-
-#: The pyproject extra that installs what a built-in method needs, where it needs one.
-METHOD_EXTRAS: dict[str, str] = {"pyvrp": "peers"}
-
-_registered: dict[str, Callable[..., Allocator]] = {}
-
-
-def register(name: str) -> Callable[[type], type]:
-    """Class decorator registering a method in this process (tests and notebooks)."""
-
-    def decorate(cls: type) -> type:
-        _registered[name] = cls
-        return cls
-
-    return decorate
-
-
-def _plugin_methods() -> dict[str, Any]:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
-
-
-def available_methods() -> list[str]:
-    return sorted({*BUILTIN_METHODS, *_registered, *_plugin_methods()})
-
-
-def method_source(name: str) -> str:
-    if name in _registered:
-        return "registered"
-    if name in BUILTIN_METHODS:
-        return "built-in"
-    return "plug-in"
-
-
-class MethodUnavailable(TsacBenchError):
-    """A known method whose optional dependencies are not installed."""
-
-
-def allocator_class(name: str) -> Callable[..., Allocator]:
-    if name in _registered:
-        return _registered[name]
-    plugins = _plugin_methods()
-    if name in BUILTIN_METHODS:
-        module_name, _, attr = BUILTIN_METHODS[name].partition(":")
-        try:
-            return getattr(importlib.import_module(module_name), attr)
-        except ImportError as exc:
-            extra = METHOD_EXTRAS.get(name, "all")
-            raise MethodUnavailable(f"method {name!r} needs {exc.name!r}: "
-                                    f"pip install -e '.[{extra}]'") from None
-    if name in plugins:
-        try:
-            return plugins[name].load()
-        except ImportError as exc:
-            raise MethodUnavailable(f"plug-in method {name!r} needs {exc.name!r}") from None
-    raise UnknownMethodError(name, available_methods())
-
-
-def make_allocator(name: str, **settings: Any) -> Allocator:
-    """The method ``name`` built with ``settings`` (its constructor keywords); a name the
-    constructor does not take is a one-line error listing the ones it does."""
-    cls = allocator_class(name)
-    parameters = inspect.signature(cls).parameters.values()
-    accepted = [p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD,
-                                                         p.KEYWORD_ONLY)]
-    takes_any = any(p.kind == p.VAR_KEYWORD for p in parameters)
-    unknown = sorted(set(settings) - set(accepted))
-    if unknown and not takes_any:
-        raise TsacBenchError(f"method {name!r} has no setting {unknown[0]!r}; its settings: "
-                             f"{', '.join(accepted) or 'none'}")
-    return cls(**settings)

@@ -104,7 +104,7 @@ class ScenarioGenerator:
             name=name or f"gen-{n_aavs}-{n_tasks}-s{seed}",
             aavs=aavs, depots=depots, tasks=tuple(tasks),
             horizon=self.horizon, weights=self.weights, seed=seed,
-            meta={"generator": "tsac_bench.generator.ScenarioGenerator", "scale":
+            meta={"generator": "tsac_bench.model.generator.ScenarioGenerator", "scale":
                   f"{n_aavs}/{n_tasks}", "depots": k},
         )
 

@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from tsac_bench.allocator import Allocator, PlanningState, PlanResult
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.evaluator import TIME_TOLERANCE, CostEvaluator, Evaluation, RouteTrace
 from tsac_bench.model import Instance, Route
+from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator, Evaluation, RouteTrace
+from tsac_bench.planning.allocator import Allocator, PlanningState, PlanResult
 
 
 class InvalidPlan(TsacBenchError):

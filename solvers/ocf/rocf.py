@@ -2,15 +2,15 @@
 
 The deciding AAV picks one of its candidate tasks uniformly at random: every valid task it
 could join and every task of its own free route it could leave, with equal probability.
-Everything else is the shared engine of ``solvers/ocf.py``.
+Everything else is the shared engine of ``solvers/ocf/engine.py``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from tsac_bench.allocator import PlanningState
-from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
+from tsac_bench.planning import PlanningState
+from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
 
 
 class UniformSelection:

@@ -7,7 +7,7 @@ caught here and returned as a result with a status, so one bad job never stops a
 that hangs or kills its process is handled by the caller, which runs it in a separate process
 with a hard timeout (``run_in_subprocess`` here, or the local pool in ``executors``).
 
-``python -m tsac_bench.worker SPEC.json RESULT.json`` runs one job from files.
+``python -m tsac_bench.batch.worker SPEC.json RESULT.json`` runs one job from files.
 """
 
 from __future__ import annotations
@@ -62,8 +62,8 @@ def failure(status: str, message: str, detail: str = "") -> dict[str, Any]:
 def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     """Run one (instance, method, mode, seed) job; never raises for a job's own failure."""
     from tsac_bench.errors import TsacBenchError
-    from tsac_bench.io import instance_from_dict, solution_to_dict
-    from tsac_bench.solve import InvalidPlan, solve
+    from tsac_bench.model.io import instance_from_dict, solution_to_dict
+    from tsac_bench.planning.solve import InvalidPlan, solve
 
     instance = instance_from_dict(spec["instance"], spec.get("instance_file", "<instance>"))
     try:
@@ -134,7 +134,7 @@ def run_in_subprocess(spec: dict[str, Any]) -> dict[str, Any]:
         spec_file.write_text(json.dumps(spec), encoding="utf-8")
         timeout = hard_timeout(spec)
         # A new session: on timeout the whole group goes, solver helper processes included.
-        process = subprocess.Popen([sys.executable, "-m", "tsac_bench.worker", str(spec_file),
+        process = subprocess.Popen([sys.executable, "-m", "tsac_bench.batch.worker", str(spec_file),
                                     str(result_file)], stdout=subprocess.PIPE,
                                    stderr=subprocess.PIPE, text=True, start_new_session=True)
         try:

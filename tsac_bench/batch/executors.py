@@ -15,7 +15,7 @@ from collections.abc import Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from tsac_bench.worker import (
+from tsac_bench.batch.worker import (
     execute_job,
     failure,
     hard_timeout,
@@ -83,7 +83,7 @@ def _context() -> Any:
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
     if "forkserver" in methods:
-        context.set_forkserver_preload(["tsac_bench.worker"])
+        context.set_forkserver_preload(["tsac_bench.batch.worker"])
     return context
 
 

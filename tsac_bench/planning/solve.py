@@ -9,17 +9,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsac_bench.allocator import (
-    ALL_MODES,
-    Allocator,
-    PlanningState,
-    make_allocator,
-    supported_modes,
-)
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.evaluator import Evaluation
 from tsac_bench.model import Instance, Solution
-from tsac_bench.simulator import InvalidPlan, checked_plan, simulate
+from tsac_bench.model.evaluator import Evaluation
+from tsac_bench.planning.allocator import ALL_MODES, Allocator, PlanningState, supported_modes
+from tsac_bench.planning.registry import make_allocator
+from tsac_bench.planning.simulator import InvalidPlan, checked_plan, simulate
 
 __all__ = ["MODES", "InvalidPlan", "SolveOutcome", "solve"]
 

@@ -1,5 +1,6 @@
 """Tables and statistics of a run directory (pandas + scipy), and the report that ties them
-to the figures of ``tsac_bench.figures``: ``tsac-bench report results/NAME --out reports/NAME``.
+to the figures of ``tsac_bench.reporting.figures``:
+``tsac-bench report results/NAME --out reports/NAME``.
 
 How the numbers are made (docs/reports.md says the same for readers of a report):
 * Only jobs with status ``ok`` have a J; failed jobs are counted, never averaged.
@@ -25,8 +26,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from tsac_bench.runner import EXACT_METHODS, OK
-from tsac_bench.store import ResultStore
+from tsac_bench.batch.runner import EXACT_METHODS, OK
+from tsac_bench.batch.store import ResultStore
 
 #: Two costs closer than this (relative) tie for a win.
 TIE_TOLERANCE = 1e-9
@@ -175,7 +176,7 @@ class SolutionLoader:
 
     def instance(self, row: Any) -> Any | None:
         from tsac_bench.errors import InputError
-        from tsac_bench.io import read_instance
+        from tsac_bench.model.io import read_instance
 
         path = row["instance_file"]
         if not isinstance(path, str):
@@ -190,7 +191,7 @@ class SolutionLoader:
     def solution(self, row: Any) -> tuple[Any, Any] | None:
         """(instance, solution) of an ok row, or None where a file is gone."""
         from tsac_bench.errors import InputError
-        from tsac_bench.io import read_solution
+        from tsac_bench.model.io import read_solution
 
         instance = self.instance(row)
         if instance is None or not isinstance(row["solution_file"], str):
@@ -204,7 +205,7 @@ class SolutionLoader:
 def coalition_sizes(frame: pd.DataFrame, run_dir: Path) -> pd.DataFrame:
     """Per served task of every ok job: its demand and coalition size, as the evaluator
     computes them from the stored solution (the data of the paper's Fig. 6)."""
-    from tsac_bench.evaluator import CostEvaluator
+    from tsac_bench.model.evaluator import CostEvaluator
 
     loader = SolutionLoader(run_dir)
     rows = []
@@ -462,7 +463,7 @@ def _run_section(frame: pd.DataFrame, meta: dict[str, Any], run_dir: Path) -> li
 def _figure_section(frame: pd.DataFrame, instances: pd.DataFrame, run_dir: Path,
                     out: Path) -> list[str]:
     try:
-        from tsac_bench import figures
+        from tsac_bench.reporting import figures
     except ImportError as exc:
         return ["## Figures", "", f"Not drawn: {exc} (pip install -e '.[report]').", ""]
     lines = ["## Figures", ""]

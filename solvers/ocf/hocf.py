@@ -24,9 +24,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from tsac_bench.allocator import PlanningState
 from tsac_bench.model import Instance
-from tsac_bench.solvers.ocf import DecisionView, OCFAllocator, SelectionRule
+from tsac_bench.planning import PlanningState
+from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
 
 
 class HeuristicSelection:

@@ -41,6 +41,7 @@ class ExactAllocator(Settings):
     """The MILP of formulations/milp.py solved by HiGHS."""
 
     name = "exact"
+    proves_optimality = True
 
     def __init__(self, time_limit: float | None = None, threads: int = 1,
                  mip_rel_gap: float = 1e-9, warm_start: bool = True,
@@ -100,6 +101,7 @@ class CpSatAllocator(Settings):
     """The CP-SAT model of formulations/cpsat.py (static states)."""
 
     name = "exact-cpsat"
+    proves_optimality = True
     modes = ("static",)
 
     def __init__(self, time_limit: float | None = None, threads: int = 1,

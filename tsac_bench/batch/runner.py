@@ -21,7 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from tsac_bench.batch.store import ResultStore, job_key
+from tsac_bench.batch.store import OK, ResultStore, job_key
 from tsac_bench.batch.worker import GRACE_SECONDS, hard_timeout
 from tsac_bench.errors import InputError, TsacBenchError
 from tsac_bench.model import Instance
@@ -30,30 +30,28 @@ from tsac_bench.planning import (
     MethodUnavailable,
     allocator_class,
     available_methods,
+    is_exact_method,
     supported_modes,
 )
 
-#: Methods that prove optimality; their static runs may supply J* (see ``report``).
-EXACT_METHODS = ("exact", "exact-cpsat")
 #: Default solver time limit, in seconds per 10 tasks (never below one unit), of one plan
 #: call: a static job plans once, a dynamic one once plus once per release event. Sized so
 #: that the shipped sets (<= 10 tasks) run with every method in a few minutes on 2 cores;
 #: exact methods are capped short because there J* comes from the manifest, not from the run.
-DEFAULT_TIME_LIMITS = {"exact": 10.0, "exact-cpsat": 10.0}
 DEFAULT_TIME_LIMIT = 2.0
+DEFAULT_EXACT_TIME_LIMIT = 10.0
 
 
 def default_time_limit(method: str, n_tasks: int) -> float:
     """The time limit a job gets without --time-limit: grows linearly with the task count."""
-    per_ten = DEFAULT_TIME_LIMITS.get(method, DEFAULT_TIME_LIMIT)
+    per_ten = DEFAULT_EXACT_TIME_LIMIT if is_exact_method(method) else DEFAULT_TIME_LIMIT
     return per_ten * max(1.0, n_tasks / 10)
+
 MODE_CHOICES = ("auto", "static", "dynamic", "both")
 MANIFEST_NAME = "manifest.json"
 #: What the local worker processes print (solver logs, warnings), in the run directory.
 WORKER_LOG = "workers.log"
 MANIFEST_FORMAT = "tsac-bench/manifest@1"
-#: Statuses of a job that produced a scored solution; anything else is a failure.
-OK = "ok"
 
 
 @dataclass(frozen=True)

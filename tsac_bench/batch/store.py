@@ -20,6 +20,8 @@ from typing import Any
 from tsac_bench.errors import InputError, TsacBenchError
 
 DB_NAME = "results.sqlite"
+#: The status of a job that produced a scored solution; anything else is a failure.
+OK = "ok"
 SOLUTIONS_DIR = "solutions"
 
 #: Column name -> SQLite type. JSON columns hold text and come back as Python objects.

@@ -15,10 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from tsac_bench.errors import InputError
+from tsac_bench.planning import exact_methods
 
 MANIFEST_FORMAT = "tsac-bench/manifest@1"
 MANIFEST = "manifest.json"
-BACKENDS = ("exact", "exact-cpsat")
 #: Two J values agree when they differ by at most this, relative to max(1, |J|).
 AGREEMENT = 1e-6
 
@@ -87,7 +87,7 @@ def entry_from(results: dict[str, dict[str, Any]], file: str, command: str) -> d
 
 def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
           names: Iterable[str] | None = None, log: Any = print) -> dict[str, Any]:
-    """Solve every instance of ``directory`` with both backends and write the manifest
+    """Solve every instance of ``directory`` with every exact method and write the manifest
     (entries of instances not solved this time are kept)."""
     from tsac_bench.model.io import iter_instance_files, read_instance
 
@@ -99,7 +99,7 @@ def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
         name = read_instance(file).name
         if wanted is not None and name not in wanted:
             continue
-        results = {m: solve_exact(file, m, time_limit, threads) for m in BACKENDS}
+        results = {m: solve_exact(file, m, time_limit, threads) for m in exact_methods()}
         entry = entry_from(results, file.name, command)
         manifest["instances"][name] = entry
         log(f"{name}: {entry['status']} J*={entry['J_star']} LB={entry['lower_bound']:.6f} "
@@ -121,12 +121,14 @@ class Check:
     reason: str
 
 
-def verify(directory: Path, methods: Sequence[str] = BACKENDS, time_limit: float | None = None,
-           names: Iterable[str] | None = None, threads: int = 1) -> list[Check]:
+def verify(directory: Path, methods: Sequence[str] | None = None,
+           time_limit: float | None = None, names: Iterable[str] | None = None, threads: int = 1) -> list[Check]:
     """Re-solve the manifest's instances: an optimal J* must be matched (and proved again,
     unless the time limit stops the solver, in which case J* must lie in [LB, J]); an open
-    entry's best known bound must not exceed the new J."""
+    entry's best known bound must not exceed the new J. ``methods``: every installed method
+    that proves optimality when None."""
     manifest = read_manifest(directory)
+    methods = exact_methods() if methods is None else methods
     wanted = set(names) if names is not None else None
     checks = []
     for name, entry in manifest["instances"].items():

@@ -11,6 +11,7 @@ from tsac_bench.planning.allocator import (
     PlanningState,
     PlanResult,
     Settings,
+    proves_optimality,
     supported_modes,
 )
 from tsac_bench.planning.registry import (
@@ -19,6 +20,8 @@ from tsac_bench.planning.registry import (
     MethodUnavailable,
     allocator_class,
     available_methods,
+    exact_methods,
+    is_exact_method,
     make_allocator,
     method_source,
     register,
@@ -35,8 +38,11 @@ __all__ = [
     "Settings",
     "allocator_class",
     "available_methods",
+    "exact_methods",
+    "is_exact_method",
     "make_allocator",
     "method_source",
+    "proves_optimality",
     "register",
     "supported_modes",
 ]

@@ -113,7 +113,10 @@ ALL_MODES = ("static", "dynamic")
 class Allocator(Protocol):
     """``name`` is what users type. An allocator may also declare ``modes`` (a tuple of
     "static", "dynamic"; both when absent): the planning states it can handle. "static"
-    states have nothing committed; "dynamic" ones have committed prefixes and hidden tasks."""
+    states have nothing committed; "dynamic" ones have committed prefixes and hidden tasks.
+    A method that returns ``stats["status"] == "optimal"`` only for proven optima declares
+    ``proves_optimality = True``: its static runs may then supply J* to reports and
+    ``tsac-bench verify`` uses it as a backend."""
 
     name: ClassVar[str]
 
@@ -124,6 +127,11 @@ class Allocator(Protocol):
 def supported_modes(allocator: object) -> tuple[str, ...]:
     """The modes an allocator (class or instance) declares it can plan."""
     return tuple(getattr(allocator, "modes", ALL_MODES))
+
+
+def proves_optimality(allocator: object) -> bool:
+    """Whether an allocator (class or instance) declares that it proves optimality."""
+    return bool(getattr(allocator, "proves_optimality", False))
 
 
 class Settings:

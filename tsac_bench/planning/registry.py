@@ -9,7 +9,7 @@ from importlib.metadata import entry_points
 from typing import Any
 
 from tsac_bench.errors import TsacBenchError, UnknownMethodError
-from tsac_bench.planning.allocator import Allocator
+from tsac_bench.planning.allocator import Allocator, proves_optimality
 
 ENTRY_POINT_GROUP = "tsac_bench.allocators"
 
@@ -95,3 +95,24 @@ def make_allocator(name: str, **settings: Any) -> Allocator:
         raise TsacBenchError(f"method {name!r} has no setting {unknown[0]!r}; its settings: "
                              f"{', '.join(accepted) or 'none'}")
     return cls(**settings)
+
+
+def exact_methods() -> list[str]:
+    """The available methods that declare ``proves_optimality`` (unloadable ones left out)."""
+    exact = []
+    for name in available_methods():
+        try:
+            if proves_optimality(allocator_class(name)):
+                exact.append(name)
+        except Exception:  # a broken plug-in is not an exact method; listing it elsewhere says why
+            continue
+    return exact
+
+
+def is_exact_method(label: str) -> bool:
+    """Whether the method of a stored label (``NAME`` or ``NAME:KEY=VALUE...``) proves
+    optimality; a method not installed here is not taken as exact."""
+    try:
+        return proves_optimality(allocator_class(label.partition(":")[0]))
+    except Exception:  # unknown or unloadable: its results cannot be taken as proven optima
+        return False

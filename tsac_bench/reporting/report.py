@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from tsac_bench.batch.runner import EXACT_METHODS, OK
-from tsac_bench.batch.store import ResultStore
+from tsac_bench.batch.store import OK, ResultStore
+from tsac_bench.planning import is_exact_method
 
 #: Two costs closer than this (relative) tie for a win.
 TIE_TOLERANCE = 1e-9
@@ -65,7 +65,7 @@ def references(frame: pd.DataFrame) -> pd.DataFrame:
     refs["J_star"] = manifest["J_star"]
     refs["lower_bound"] = manifest["lower_bound"]
     refs["J_star_source"] = np.where(refs["J_star"].notna(), "manifest", None)
-    exact = frame[frame["method"].isin(EXACT_METHODS) & (frame["mode"] == "static")
+    exact = frame[frame["method"].map(is_exact_method).astype(bool) & (frame["mode"] == "static")
                   & (frame["status"] == OK)]
     for instance, rows in exact.groupby("instance"):
         stats = rows["stats"].map(lambda s: s if isinstance(s, dict) else {})

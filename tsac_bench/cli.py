@@ -208,8 +208,8 @@ def solve(
 def verify(
     directory: Annotated[Path, typer.Argument(metavar="DIR", help="a directory with a "
                                               "manifest.json of proven optima")],
-    method: Annotated[list[str] | None, typer.Option(help="exact backend(s) to re-run "
-                                                     "(default: every method that proves optimality)")]
+    method: Annotated[list[str] | None, typer.Option(
+        help="exact backend(s) to re-run (default: every method that proves optimality)")]
     = None,
     only: Annotated[list[str] | None, typer.Option(help="instance name(s) to check")] = None,
     time_limit: Annotated[float | None, typer.Option(help="seconds per solve")] = 600.0,

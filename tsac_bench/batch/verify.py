@@ -122,7 +122,8 @@ class Check:
 
 
 def verify(directory: Path, methods: Sequence[str] | None = None,
-           time_limit: float | None = None, names: Iterable[str] | None = None, threads: int = 1) -> list[Check]:
+           time_limit: float | None = None, names: Iterable[str] | None = None,
+           threads: int = 1) -> list[Check]:
     """Re-solve the manifest's instances: an optimal J* must be matched (and proved again,
     unless the time limit stops the solver, in which case J* must lie in [LB, J]); an open
     entry's best known bound must not exceed the new J. ``methods``: every installed method

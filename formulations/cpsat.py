@@ -87,7 +87,7 @@ def build_cpsat(instance: Instance, tasks: Sequence[int] | None = None,
     depots = list(instance.depot_nodes)
     model = cp_model.CpModel()
     data = CpsatData(instance, chosen, scale, obj_scale,
-                     (w1 + w2) * (instance.n_tasks - len(chosen)))
+                     instance.unserved_task_cost * (instance.n_tasks - len(chosen)))
     objective: list[Any] = []
     constant_units = 0
 

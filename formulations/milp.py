@@ -91,7 +91,7 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
     horizon = instance.horizon
     e_base = instance.e_base
     data = MilpData(instance, chosen, networks, prefixes, late,
-                    constant=(w1 + w2) * (instance.n_tasks - len(chosen)))
+                    constant=instance.unserved_task_cost * (instance.n_tasks - len(chosen)))
 
     model = pyo.ConcreteModel(name=f"tsac-milp[{instance.name}]")
     model.data = data

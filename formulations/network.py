@@ -52,7 +52,7 @@ def canonical_routes(instance: Instance, routes: Sequence[Route],
         trace = evaluator.trace(n, route)
         keep = [v for k, v in enumerate(route)
                 if k < free[n] or is_depot(v.node)
-                or trace.arrivals[k] <= instance.tasks[v.node].t_end + TIME_TOLERANCE]
+                or instance.tasks[v.node].on_time(trace.arrivals[k])]
         routes[n] = tuple(keep)
     # Amounts above the demand: cut the latest-indexed AAVs' shares first (deterministic).
     for m, task in enumerate(instance.tasks):
@@ -171,7 +171,7 @@ def aav_network(instance: Instance, n: int, tasks: Sequence[int],
         if j in fixed_arrival:
             early = late = fixed_arrival[j]
         else:
-            early, late = max(task.t_start, shortest / v), task.t_end + TIME_TOLERANCE
+            early, late = max(task.t_start, shortest / v), task.latest_on_time
             if early > late:
                 continue
         earliest[j], latest[j], min_distance[j] = early, late, shortest
@@ -256,7 +256,7 @@ def late_committed(instance: Instance, committed: Sequence[Route]) -> set[tuple[
     late = set()
     for n, prefix in enumerate(committed):
         for m, t in prefix_arrivals(instance, n, prefix).items():
-            if t > instance.tasks[m].t_end + TIME_TOLERANCE:
+            if not instance.tasks[m].on_time(t):
                 late.add((n, m))
     return late
 

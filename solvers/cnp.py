@@ -80,7 +80,7 @@ class Contractor:
         if commitment == "arrival":
             self._promised = _promised_arrival
         else:
-            deadline = tuple(t.t_end + TIME_TOLERANCE for t in instance.tasks)
+            deadline = tuple(t.latest_on_time for t in instance.tasks)
             self._promised = lambda m, c: max(c.arrival, deadline[m])
 
     def keeps_contracts(self, before: RouteTrace, proposal: Proposal) -> bool:

@@ -20,12 +20,9 @@ from dataclasses import fields
 from typing import Any
 
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.evaluator import CostEvaluator, costs_agree
 from tsac_bench.planning import PlanningState, PlanResult, Settings
 from tsac_bench.solvers.greedy import GreedyAllocator
-
-#: The evaluator's J and an optimal solver's objective agree to this relative tolerance.
-OBJECTIVE_TOLERANCE = 1e-6
 
 
 def _limit(own: float | None, call: float | None) -> float | None:
@@ -132,19 +129,18 @@ class CpSatAllocator(Settings):
         stats.update(outcome.stats)
         stats["wall_time"] = time.perf_counter() - began
         return _checked(evaluator, routes, stats, objective_key="scaled_objective",
-                        tolerance=None)
+                        check_objective=False)
 
 
 def _checked(evaluator: CostEvaluator, routes: tuple, stats: dict[str, Any],
-             objective_key: str = "objective", tolerance: float | None = OBJECTIVE_TOLERANCE
-             ) -> PlanResult:
-    """Record the evaluator's J; an optimal solver objective that disagrees with it beyond
-    ``tolerance`` marks the result as an error (a model bug), never silently passes."""
+             objective_key: str = "objective", check_objective: bool = True) -> PlanResult:
+    """Record the evaluator's J; an optimal solver objective that disagrees with it
+    (``costs_agree``) marks the result as an error (a model bug), never silently passes."""
     J = evaluator.cost(routes)
     stats["J"] = J
     objective = stats.get(objective_key)
-    if (tolerance is not None and stats.get("status") == "optimal" and objective is not None
-            and abs(J - objective) > tolerance * max(1.0, abs(J))):
+    if (check_objective and stats.get("status") == "optimal" and objective is not None
+            and not costs_agree(J, objective)):
         stats["status"] = "error"
         stats["stop_reason"] = f"solver objective {objective} != evaluator J {J}"
     bound = stats.get("lower_bound")

@@ -115,7 +115,7 @@ def test_instances_and_solutions_pickle_for_worker_processes(hand):
 
 
 def test_a_walk_skips_sweep_sets_unless_they_are_named(tmp_path, hand):
-    from tsac_bench.model.io import SWEEP_MARKER, iter_instance_files, sweep_sets_below
+    from tsac_bench.batch.manifests import SWEEP_MARKER, iter_instance_files, sweep_sets_below
 
     for folder in ("quick", "big"):
         write_instance(hand, tmp_path / folder / "hand.json")

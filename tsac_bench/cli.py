@@ -104,7 +104,7 @@ def evaluate(
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
 ) -> None:
     """Check a solution and print J with its breakdown (exit 1 if infeasible)."""
-    from tsac_bench.model.evaluator import CostEvaluator
+    from tsac_bench.model.evaluator import CostEvaluator, costs_agree
     from tsac_bench.model.io import read_instance, read_solution
 
     instance = read_instance(instance_path)
@@ -119,13 +119,10 @@ def evaluate(
             say_error(f"{solution_path}: {error}")
     if not result.feasible:
         raise typer.Exit(1)
-    if solution.cost is not None and result.J is not None and not _close(solution.cost, result.J):
-        say_error(f"warning: {solution_path}: cost: the file claims {solution.cost}, the "
+    claimed = solution.cost
+    if claimed is not None and result.J is not None and not costs_agree(claimed, result.J):
+        say_error(f"warning: {solution_path}: cost: the file claims {claimed}, the "
                   f"evaluator computes {result.J}")
-
-
-def _close(a: float, b: float) -> bool:
-    return abs(a - b) <= 1e-6 * max(1.0, abs(b))
 
 
 def _print_breakdown(result: Any) -> None:

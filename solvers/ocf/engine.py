@@ -44,7 +44,7 @@ from typing import Any, ClassVar, NamedTuple, Protocol
 import numpy as np
 
 from tsac_bench.model import Route
-from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator, PlanState, Proposal
+from tsac_bench.model.evaluator import CostEvaluator, PlanState, Proposal
 from tsac_bench.planning import PlanningState, PlanResult, Settings
 from tsac_bench.planning.insertion import best_insertion, removal_route
 
@@ -105,7 +105,7 @@ class CoalitionGame:
         self.first_free = [state.first_free(n) for n in range(self.n_aavs)]
         self.visible = sorted(state.visible)
         self._dist = instance.dist_rows
-        self._t_end = [t.t_end + TIME_TOLERANCE for t in instance.tasks]
+        self._latest_on_time = [t.latest_on_time for t in instance.tasks]
         self._demand = [t.demand for t in instance.tasks]
         self._speed = [a.speed for a in instance.aavs]
         self._range = [a.max_range for a in instance.aavs]
@@ -163,7 +163,7 @@ class CoalitionGame:
             if m in own:
                 if m in removable:
                     valid.append(m)
-            elif (row[m] <= reach and anchor.time + row[m] / speed <= self._t_end[m]
+            elif (row[m] <= reach and anchor.time + row[m] / speed <= self._latest_on_time[m]
                   and self.residual(n, m) >= 1):
                 valid.append(m)
         return valid

@@ -51,7 +51,7 @@ class HeuristicSelection:
     def ineffective(self, view: DecisionView, m: int) -> bool:
         game, n = view.game, view.aav
         own = game.plan.members[m][n]
-        late = own.arrival > game.instance.tasks[m].t_end
+        late = not game.instance.tasks[m].on_time(own.arrival)
         return late or view.residual(m) == 0
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:

@@ -25,7 +25,6 @@ import gymnasium as gym
 import numpy as np
 
 from tsac_bench.model import Instance
-from tsac_bench.model.evaluator import TIME_TOLERANCE
 from tsac_bench.model.generator import ScenarioGenerator, parse_scale
 from tsac_bench.planning import PlanningState
 from tsac_bench.solvers.ocf.engine import (
@@ -99,7 +98,7 @@ def observe(view: DecisionView) -> Observation:
     free_route = [view.anchor.node, *(v.node for v in game.route(n)[game.first_free[n]:])]
     route_distance = game.instance.dist[np.ix_(free_route, visible)].min(axis=0) / 10_000.0
     own = game.plan.members
-    t_end = [game.instance.tasks[m].t_end + TIME_TOLERANCE for m in game.visible]
+    t_end = [game.instance.tasks[m].latest_on_time for m in game.visible]
     own_late = np.array([n in own[m] and own[m][n].arrival > t_end[i]
                          for i, m in enumerate(game.visible)], dtype=float)
     tasks = np.concatenate([tasks, relative, coverable[:, None], route_distance[:, None],
@@ -235,7 +234,7 @@ class TaskSelectionEnv(gym.Env):
             if self._next_turn():
                 break
         self._steps = 0
-        self._scale = self.reward_scale or sum(state.instance.weights[:2])
+        self._scale = self.reward_scale or state.instance.unserved_task_cost
         return self._observation(), {"J": self.game.cost, "instance": state.instance.name}
 
     def step(self, action: int) -> tuple[dict[str, np.ndarray], float, bool, bool, dict]:

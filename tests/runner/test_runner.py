@@ -168,13 +168,17 @@ def test_manifest_references_give_gaps(tmp_path, two_instances):
 def test_a_malformed_manifest_is_reported_and_the_run_goes_on(tmp_path, two_instances):
     (two_instances / "manifest.json").write_text(json.dumps(
         {"format": "tsac-bench/manifest@1",
-         "instances": {"quick-2-4-s1": {"J_star": "12"}}}))
+         "instances": {"quick-2-4-s1": {"file": "quick-2-4-s1.json", "J_star": "12",
+                                        "lower_bound": None, "status": "optimal"},
+                       "quick-2-5-s2": {"J_star": 1.0}}}))
     notes: list[str] = []
     outcome = run_batch(RunConfig([two_instances], tmp_path / "run", methods=["greedy"],
                                   mode="static", jobs=1), note=notes.append, progress=False)
     assert outcome.problems == [f"{two_instances / 'manifest.json'}: "
                                 "instances.quick-2-4-s1.J_star: expected a number or null, "
-                                "got '12'"]
+                                "got '12'",
+                                f"{two_instances / 'manifest.json'}: "
+                                "instances.quick-2-5-s2.file: missing"]
     assert outcome.ran == 2 and outcome.failed == 0
 
 

@@ -10,7 +10,6 @@ status and message and count as finished; ``--retry-failed`` runs them again.
 
 from __future__ import annotations
 
-import json
 import os
 import shlex
 import sys
@@ -21,12 +20,18 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from tsac_bench.batch.manifests import (
+    Reference,
+    iter_instance_files,
+    read_manifest,
+    sweep_sets_below,
+)
 from tsac_bench.batch.store import OK, ResultStore, job_key
 from tsac_bench.batch.worker import GRACE_SECONDS, hard_timeout
 from tsac_bench.errors import InputError, TsacBenchError
 from tsac_bench.model import Instance
-from tsac_bench.model.io import sweep_sets_below
 from tsac_bench.planning import (
+    ALL_MODES,
     MethodUnavailable,
     allocator_class,
     available_methods,
@@ -47,20 +52,9 @@ def default_time_limit(method: str, n_tasks: int) -> float:
     per_ten = DEFAULT_EXACT_TIME_LIMIT if is_exact_method(method) else DEFAULT_TIME_LIMIT
     return per_ten * max(1.0, n_tasks / 10)
 
-MODE_CHOICES = ("auto", "static", "dynamic", "both")
-MANIFEST_NAME = "manifest.json"
+MODE_CHOICES = ("auto", *ALL_MODES, "both")
 #: What the local worker processes print (solver logs, warnings), in the run directory.
 WORKER_LOG = "workers.log"
-MANIFEST_FORMAT = "tsac-bench/manifest@1"
-
-
-@dataclass(frozen=True)
-class Reference:
-    """What is known of an instance's exact optimum before the run."""
-
-    J_star: float | None = None
-    lower_bound: float | None = None
-    source: str | None = None
 
 
 @dataclass(frozen=True)
@@ -92,41 +86,10 @@ class BatchOutcome:
 
 
 # --- inputs ------------------------------------------------------------------------------
-def read_manifest(directory: Path) -> tuple[dict[str, Reference], list[str]]:
-    """References by instance name from ``directory/manifest.json`` (none if absent), and
-    the problems found in it (a malformed manifest is reported, not fatal: gaps are missing)."""
-    path = directory / MANIFEST_NAME
-    if not path.exists():
-        return {}, []
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        return {}, [f"{path}: not readable as JSON: {exc}"]
-    if not isinstance(data, dict) or data.get("format") != MANIFEST_FORMAT:
-        got = data.get("format") if isinstance(data, dict) else type(data).__name__
-        return {}, [f"{path}: format: expected {MANIFEST_FORMAT!r}, got {got!r}"]
-    entries = data.get("instances")
-    if not isinstance(entries, dict):
-        return {}, [f"{path}: instances: expected an object of instance entries"]
-    references, problems = {}, []
-    for name, entry in entries.items():
-        values = {}
-        for key in ("J_star", "lower_bound"):
-            value = entry.get(key) if isinstance(entry, dict) else None
-            if value is not None and (isinstance(value, bool)
-                                      or not isinstance(value, int | float)):
-                problems.append(f"{path}: instances.{name}.{key}: expected a number or null, "
-                                f"got {value!r}")
-                value = None
-            values[key] = None if value is None else float(value)
-        references[name] = Reference(values["J_star"], values["lower_bound"], "manifest")
-    return references, problems
-
-
 def load_instances(paths: Sequence[Path]) -> tuple[list[LoadedInstance], list[str]]:
     """Every instance file under ``paths``; each unreadable file becomes one problem line
     (file and field) and the others load."""
-    from tsac_bench.model.io import instance_to_dict, iter_instance_files, read_instance
+    from tsac_bench.model.io import instance_to_dict, read_instance
 
     problems: list[str] = []
     for path in paths:
@@ -148,8 +111,10 @@ def load_instances(paths: Sequence[Path]) -> tuple[list[LoadedInstance], list[st
             continue
         seen[instance.name] = path
         if path.parent not in manifests:
-            manifests[path.parent], manifest_problems = read_manifest(path.parent)
-            problems.extend(manifest_problems)
+            manifest = read_manifest(path.parent)
+            if manifest.path.exists():  # a set without a manifest simply has no references
+                problems.extend(manifest.problem_lines())
+            manifests[path.parent] = manifest.references()
         reference = manifests[path.parent].get(instance.name, Reference())
         loaded.append(LoadedInstance(path, instance, instance_to_dict(instance),
                                      path.parent.name, reference))
@@ -180,14 +145,11 @@ def resolve_methods(requested: Sequence[str] | None) -> tuple[list[str], list[st
 
 
 def resolve_modes(mode: str) -> list[str]:
-    """``auto``: static, plus dynamic where this build's ``solve`` supports it."""
-    from tsac_bench.planning.solve import MODES
-
-    if mode == "auto":
-        return [m for m in ("static", "dynamic") if m in MODES]
-    if mode == "both":
-        return ["static", "dynamic"]
-    if mode in ("static", "dynamic"):
+    """``auto`` and ``both``: every planning mode (a method that declares fewer gets jobs
+    only in its own)."""
+    if mode in ("auto", "both"):
+        return list(ALL_MODES)
+    if mode in ALL_MODES:
         return [mode]
     raise TsacBenchError(f"--mode: expected one of {', '.join(MODE_CHOICES)}, got {mode!r}")
 

@@ -18,11 +18,24 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from tsac_bench.model import Instance, Route, Solution, Visit
+from tsac_bench.model.instance import TIME_TOLERANCE, Instance
+from tsac_bench.model.solution import Route, Solution, Visit
 
-#: Arrival times are sums of float legs; a visit counts as on time up to this slack (s)
-#: so that an exact solver's arrival exactly at t_end is not lost to rounding.
-TIME_TOLERANCE = 1e-6
+__all__ = ["COST_TOLERANCE", "TIME_TOLERANCE", "CostEvaluator", "Evaluation", "PlanState",
+           "cost_at_least", "costs_agree", "evaluate"]
+
+#: Two costs agree when they differ by at most this, relative to max(1, |a|, |b|): how close
+#: a method's own J, a solver's objective or a manifest's J* must come to the evaluator's J.
+COST_TOLERANCE = 1e-6
+
+
+def costs_agree(a: float, b: float) -> bool:
+    return abs(a - b) <= COST_TOLERANCE * max(1.0, abs(a), abs(b))
+
+
+def cost_at_least(value: float, floor: float) -> bool:
+    """``value >= floor`` up to COST_TOLERANCE: a J against a lower bound or an optimum."""
+    return value >= floor - COST_TOLERANCE * max(1.0, abs(value), abs(floor))
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,7 +165,7 @@ class CostEvaluator:
         self._dist = instance.dist_rows
         tasks = instance.tasks
         self._t_start = tuple(float(t.t_start) for t in tasks) + (0.0,) * instance.n_depots
-        self._t_end = tuple(float(t.t_end) for t in tasks)
+        self._latest_on_time = tuple(t.latest_on_time for t in tasks)
         self._demand = tuple(t.demand for t in tasks)
         self._is_delivery = tuple(t.is_delivery for t in tasks)
         e_base = instance.e_base
@@ -165,7 +178,7 @@ class CostEvaluator:
         self._op_per_metre = tuple(a.alpha / 1000.0 / e_base for a in aavs)
         self._op_over_range = tuple(a.full_range_cost / e_base for a in aavs)
         self._start = tuple(instance.start_node(n) for n in range(len(aavs)))
-        self.empty_task_cost = TaskCost(1.0, 1.0, 0.0, self.w1 + self.w2)
+        self.empty_task_cost = TaskCost(1.0, 1.0, 0.0, instance.unserved_task_cost)
 
     # --- one route ---------------------------------------------------------------------
     def trace(self, n: int, route: Sequence[Visit]) -> RouteTrace:
@@ -250,7 +263,7 @@ class CostEvaluator:
     # --- one task ----------------------------------------------------------------------
     def task_cost(self, m: int, contributions: Iterable[Contribution]) -> TaskCost:
         """C_m of Eq. 4 from the visits of its coalition (Eqs. 5, 6, 8)."""
-        t_end = self._t_end[m] + TIME_TOLERANCE
+        t_end = self._latest_on_time[m]
         on_time_amount, latest, late, op = 0, -math.inf, False, 0.0
         any_visit = False
         for amount, arrival, q in contributions:
@@ -288,7 +301,7 @@ class CostEvaluator:
         for m, members in enumerate(by_task):
             cost = self.task_cost(m, members.values())
             ids = {n: self._aav_ids[n] for n in members}
-            t_end = self._t_end[m] + TIME_TOLERANCE
+            t_end = self._latest_on_time[m]
             per_task.append(TaskBreakdown(
                 task=instance.tasks[m].id,
                 cost=cost,
@@ -362,7 +375,7 @@ class PlanState:
 
     def covered(self, m: int, exclude: int | None = None) -> int:
         """On-time kilograms of task m delivered by AAVs other than ``exclude`` (Eq. 19)."""
-        t_end = self.evaluator._t_end[m] + TIME_TOLERANCE
+        t_end = self.evaluator._latest_on_time[m]
         return sum(c.amount for n, c in self.members[m].items()
                    if n != exclude and c.arrival <= t_end)
 

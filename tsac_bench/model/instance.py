@@ -18,6 +18,10 @@ import numpy as np
 
 from tsac_bench.errors import ModelError
 
+#: Arrival times are sums of float legs; a visit counts as on time up to this slack (s)
+#: so that an exact solver's arrival exactly at t_end is not lost to rounding.
+TIME_TOLERANCE = 1e-6
+
 
 class TaskKind(StrEnum):
     PICKUP = "P"
@@ -63,6 +67,15 @@ class Task:
     @property
     def is_delivery(self) -> bool:
         return self.kind is TaskKind.DELIVERY
+
+    @property
+    def latest_on_time(self) -> float:
+        """The latest arrival that counts as on time (t_end up to TIME_TOLERANCE): the one
+        statement of the on-time rule, which every method and model reads from here."""
+        return self.t_end + TIME_TOLERANCE
+
+    def on_time(self, arrival: float) -> bool:
+        return arrival <= self.latest_on_time
 
 
 DEFAULT_HORIZON = 3600.0

@@ -234,32 +234,3 @@ def _write_json(data: dict[str, Any], path: str | os.PathLike[str]) -> None:
     tmp = target.with_suffix(target.suffix + ".tmp")
     tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     tmp.replace(target)
-
-
-#: A file of this name marks an instance set as a sweep (hundreds of instances): walking a
-#: parent directory skips it; naming the set itself runs it.
-SWEEP_MARKER = ".sweep"
-
-
-def iter_instance_files(paths: list[Path]) -> list[Path]:
-    """Instance files under the given files or directories (recursive, sorted; no manifests,
-    no files starting with ``_``, no sweep sets below a given directory)."""
-    found: list[Path] = []
-    for path in paths:
-        if not path.is_dir():
-            found.append(path)
-            continue
-        sweeps = {marker.parent for marker in path.rglob(SWEEP_MARKER) if marker.parent != path}
-        found.extend(
-            p for p in sorted(path.rglob("*.json"))
-            if not p.name.startswith("_") and p.name != "manifest.json"
-            and not any(parent in sweeps for parent in p.parents)
-        )
-    return found
-
-
-def sweep_sets_below(path: Path) -> list[Path]:
-    """The sweep sets a walk of ``path`` leaves out (see SWEEP_MARKER)."""
-    if not path.is_dir():
-        return []
-    return sorted(marker.parent for marker in path.rglob(SWEEP_MARKER) if marker.parent != path)

@@ -105,7 +105,8 @@ class PlanResult:
     cost: float | None = None
 
 
-#: The planning modes; a method that declares ``modes`` plans only those.
+#: The planning modes. "static": every task known at t = 0, one plan call. "dynamic": the
+#: simulator's run, one plan call per release. A method that declares ``modes`` plans only those.
 ALL_MODES = ("static", "dynamic")
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 
 from tsac_bench.model import Instance, Route, Visit
-from tsac_bench.model.evaluator import TIME_TOLERANCE, PlanState, Proposal, RouteTrace
+from tsac_bench.model.evaluator import PlanState, Proposal, RouteTrace
 
 
 def insertion_routes(instance: Instance, n: int, route: Route, task: int, first_free: int = 0,
@@ -123,7 +123,7 @@ def top_up(plan: PlanState, first_free: Sequence[int]) -> int:
             trace = plan.traces[n]
             node, amount = trace.route[k]
             if node >= instance.n_tasks or \
-                    trace.arrivals[k] > tasks[node].t_end + TIME_TOLERANCE:
+                    not tasks[node].on_time(trace.arrivals[k]):
                 continue
             extra = min(tasks[node].demand - plan.covered(node),
                         max_amount(instance, trace, k) - amount)

@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from tsac_bench.model import Instance, Route, Solution, Visit
-from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator
+from tsac_bench.model.evaluator import CostEvaluator
 
 
 def polish_routes(instance: Instance, routes: Sequence[Route]) -> tuple[Route, ...]:
@@ -42,7 +42,7 @@ def polish_routes(instance: Instance, routes: Sequence[Route]) -> tuple[Route, .
         for k, v in enumerate(route):
             if instance.is_depot(v.node):
                 continue
-            if trace.arrivals[k] > instance.tasks[v.node].t_end + TIME_TOLERANCE:
+            if not instance.tasks[v.node].on_time(trace.arrivals[k]):
                 constraints.append(a[index[n, k]] == 1)
             else:
                 covered_by.setdefault(v.node, []).append(index[n, k])

@@ -36,7 +36,7 @@ import numpy as np
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.model import Instance, Route
-from tsac_bench.model.evaluator import TIME_TOLERANCE, CostEvaluator, Evaluation, RouteTrace
+from tsac_bench.model.evaluator import CostEvaluator, Evaluation, RouteTrace
 from tsac_bench.planning.allocator import Allocator, PlanningState, PlanResult
 
 
@@ -95,7 +95,7 @@ def finished_tasks(instance: Instance, traces: Sequence[RouteTrace],
     covered = [0] * instance.n_tasks
     for trace, prefix in zip(traces, prefixes, strict=True):
         for (m, amount), arrival in zip(prefix, trace.arrivals, strict=False):
-            if m < instance.n_tasks and arrival <= instance.tasks[m].t_end + TIME_TOLERANCE:
+            if m < instance.n_tasks and instance.tasks[m].on_time(arrival):
                 covered[m] += amount
     return frozenset(m for m, task in enumerate(instance.tasks)
                      if task.t_end < t or covered[m] >= task.demand)

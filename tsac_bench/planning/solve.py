@@ -4,22 +4,18 @@ runner and the CLI both go through ``solve``."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.model import Instance, Solution
-from tsac_bench.model.evaluator import Evaluation
+from tsac_bench.model.evaluator import Evaluation, costs_agree
 from tsac_bench.planning.allocator import ALL_MODES, Allocator, PlanningState, supported_modes
 from tsac_bench.planning.registry import make_allocator
 from tsac_bench.planning.simulator import InvalidPlan, checked_plan, simulate
 
-__all__ = ["MODES", "InvalidPlan", "SolveOutcome", "solve"]
-
-#: "static": every task known at t = 0, one plan call. "dynamic": the simulator's run.
-MODES = ALL_MODES
+__all__ = ["InvalidPlan", "SolveOutcome", "solve"]
 
 
 @dataclass(frozen=True)
@@ -44,7 +40,7 @@ class SolveOutcome:
         """The method's own J agrees with the evaluator's (True when it claims none)."""
         if self.claimed_cost is None:
             return True
-        return math.isclose(self.claimed_cost, self.cost, rel_tol=1e-6, abs_tol=1e-6)
+        return costs_agree(self.claimed_cost, self.cost)
 
 
 def solve(instance: Instance, method: str | Allocator, *, seed: int = 0,
@@ -54,8 +50,8 @@ def solve(instance: Instance, method: str | Allocator, *, seed: int = 0,
 
     ``time_limit`` is the budget of each plan call. Raises InvalidPlan when the method
     breaks the rules, so that no infeasible plan is ever reported with a cost."""
-    if mode not in MODES:
-        raise TsacBenchError(f"unknown mode {mode!r}; known modes: {', '.join(MODES)}")
+    if mode not in ALL_MODES:
+        raise TsacBenchError(f"unknown mode {mode!r}; known modes: {', '.join(ALL_MODES)}")
     allocator = make_allocator(method, **(settings or {})) if isinstance(method, str) else method
     if mode not in supported_modes(allocator):
         supported = " and ".join(supported_modes(allocator))

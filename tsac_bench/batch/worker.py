@@ -109,15 +109,16 @@ def jsonable(value: Any) -> Any:
 
 
 def _versions(method: str | None) -> dict[str, str]:
-    from tsac_bench import __version__
+    from tsac_bench.planning import ENTRY_POINT_GROUP
 
-    versions = {"tsac-bench": __version__, "python": platform.python_version()}
+    versions = {"tsac-bench": metadata.version("tsac-bench"),
+                "python": platform.python_version()}
     for module, dist in _VERSIONED_PACKAGES.items():
         if module in sys.modules:
             with contextlib.suppress(metadata.PackageNotFoundError):
                 versions[dist] = metadata.version(dist)
     if method is not None:
-        for ep in metadata.entry_points(group="tsac_bench.allocators"):
+        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
             if ep.name == method and ep.dist is not None:
                 versions[f"plugin:{ep.dist.name}"] = ep.dist.version
     return versions

@@ -60,6 +60,32 @@ def test_an_installed_plugin_is_listed_and_runs(tmp_path):
         assert '"method": "tiny-idle"' in out.read_text()
 
 
+PLUGIN_SUITE = '''
+import pytest
+
+from tsac_bench.testing import allocator_checks
+
+
+@pytest.mark.parametrize("check", allocator_checks("tiny-idle"), ids=str)
+def test_tiny_idle_conforms(check):
+    check()
+'''
+
+
+def test_the_shipped_conformance_suite_runs_in_a_plugin_s_own_tests(tmp_path):
+    install_plugin(tmp_path)
+    suite = tmp_path / "plugin_tests"
+    suite.mkdir()
+    (suite / "test_conformance.py").write_text(PLUGIN_SUITE)
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                           "-k", "no-tasks or one-aav", str(suite)], env=env, cwd=suite,
+                          capture_output=True, text=True, timeout=300)
+    # The idle plug-in sends nobody anywhere: right with no tasks, wrong with work to do.
+    assert "2 failed, 2 passed" in done.stdout, done.stdout[-2000:]
+    assert "tiny-idle:one-aav[static]" in done.stdout
+
+
 def test_a_plugin_with_a_missing_dependency_is_listed_as_unavailable(tmp_path):
     install_plugin(tmp_path)
     module = tmp_path / "tiny_tsac_plugin.py"

@@ -1,0 +1,260 @@
+"""Conformance checks for allocators, shipped in the package so that a plug-in's own test
+suite runs the same checks as tsac-bench's (as scikit-learn's ``check_estimator``).
+
+Run them all at once, or as one pytest test per check::
+
+    from tsac_bench.testing import allocator_checks, check_allocator
+
+    check_allocator("my-method")   # AssertionError naming the first failed check
+
+    @pytest.mark.parametrize("check", allocator_checks("my-method"), ids=str)
+    def test_my_method_conforms(check):
+        check()
+
+``method`` is a registered name (built-in, plug-in entry point or ``register``) or an
+allocator object. A check that does not apply (a mode the method does not declare, a method
+whose dependencies are missing) raises ``CheckSkipped``, a ``unittest.SkipTest`` that pytest
+reports as skipped. Every instance is built here or by the generator, so no checkout of
+tsac-bench is needed.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import unittest
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from tsac_bench.errors import TsacBenchError
+from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import AAV_TYPES, generate
+from tsac_bench.model.io import read_solution, write_solution
+from tsac_bench.planning import ALL_MODES, Allocator, MethodUnavailable, supported_modes
+from tsac_bench.planning.registry import allocator_class
+from tsac_bench.planning.solve import SolveOutcome, solve
+
+__all__ = ["DEPOTS", "FLEET", "Check", "CheckSkipped", "aav", "allocator_checks",
+           "check_allocator", "edge_cases", "small_instances", "task"]
+
+#: Seconds per plan call: small enough for a suite, large enough for the exact methods.
+TIME_LIMIT = 2.0
+#: A plan call may overrun its budget by this factor plus this many seconds (imports, setup).
+BUDGET_FACTOR, BUDGET_SLACK = 2.0, 3.0
+
+
+class CheckSkipped(unittest.SkipTest):
+    """The check does not apply to this method."""
+
+
+def aav(name: str, kind: int, x: float = 0.0, y: float = 0.0) -> AAV:
+    """An AAV of the paper's type ``kind`` (1 or 2) at (x, y)."""
+    return AAV(name, kind, x, y, **AAV_TYPES[kind])  # type: ignore[arg-type]
+
+
+def task(name: str, x: float, y: float, demand: int = 10, window=(0.0, 3000.0),
+         release: float = 0.0, kind: str = "D") -> Task:
+    """A task; ``kind`` "D" (delivery) or "P" (pickup)."""
+    return Task(name, x, y, TaskKind(kind), demand, window[0], window[1], release)
+
+
+DEPOTS = (Depot("D0", 0.0, 0.0), Depot("D1", 3000.0, 0.0))
+FLEET = (aav("A0", 1), aav("A1", 2, 3000.0, 0.0))
+
+
+def edge_cases() -> dict[str, Instance]:
+    """name -> instance; each stresses one corner of the model."""
+    return {
+        "no-tasks": Instance("no-tasks", FLEET, DEPOTS, ()),
+        "one-aav": Instance("one-aav", FLEET[:1], DEPOTS, (
+            task("T0", 1000, 1000, 10), task("T1", -1000, 2000, 20, kind="P"),
+            task("T2", 2000, -1500, 5, window=(300, 2000)))),
+        # T1 lies 7 km from every depot but closes 10 s after t = 0.
+        "unreachable": Instance("unreachable", FLEET, DEPOTS, (
+            task("T0", 1500, 1000, 10), task("T1", 5000, 5000, 5, window=(0, 10)))),
+        # 500 kg against a fleet of 30 + 10 kg, and a task visited at most once per AAV.
+        "over-demand": Instance("over-demand", FLEET, DEPOTS, (
+            task("T0", 1500, 1500, 500, kind="P"), task("T1", -500, 800, 10))),
+        "all-late": Instance("all-late", FLEET, DEPOTS, (
+            task("T0", 1000, 1000, 10, window=(200, 2000), release=200),
+            task("T1", 2000, -1000, 10, window=(400, 2400), release=400, kind="P"),
+            task("T2", -1500, 500, 20, window=(400, 3000), release=400))),
+    }
+
+
+def small_instances() -> dict[str, Instance]:
+    """Generated instances of the paper's family (the same as instances/quick)."""
+    return {f"gen-{scale.replace('/', '-')}-s{seed}": generate(scale, seed)
+            for scale, seed in (("2/5", 2), ("3/6", 3), ("4/10", 5))}
+
+
+@dataclass(frozen=True)
+class Check:
+    """One named check of one method; call it to run it."""
+
+    name: str
+    method: str | Allocator
+    run: Callable[[], None]
+
+    def __call__(self) -> None:
+        self.run()
+
+    def __str__(self) -> str:
+        return f"{_method_name(self.method)}:{self.name}"
+
+
+def _method_name(method: str | Allocator) -> str:
+    return method if isinstance(method, str) else type(method).name
+
+
+def _declared_modes(method: str | Allocator) -> tuple[str, ...]:
+    if not isinstance(method, str):
+        return supported_modes(method)
+    try:
+        return supported_modes(allocator_class(method))
+    except MethodUnavailable as exc:
+        raise CheckSkipped(str(exc)) from None
+
+
+def _run(method: str | Allocator, instance: Instance, mode: str, *, seed: int = 0,
+         time_limit: float = TIME_LIMIT) -> SolveOutcome:
+    """``solve`` plus what any reader of the solution would check again from the routes."""
+    if mode not in _declared_modes(method):
+        raise CheckSkipped(f"{_method_name(method)} declares modes {_declared_modes(method)}")
+    outcome = solve(instance, method, seed=seed, time_limit=time_limit, mode=mode)
+    fresh = CostEvaluator(instance).evaluate(outcome.solution.routes)
+    assert fresh.feasible, fresh.errors
+    assert outcome.cost == fresh.J == outcome.solution.cost
+    assert outcome.claim_matches, (f"the method claims J = {outcome.claimed_cost}, the "
+                                   f"evaluator computes {outcome.cost}")
+    return outcome
+
+
+def _load_share(outcome: SolveOutcome, task_id: str) -> float:
+    return next(b.cost.load for b in outcome.evaluation.per_task if b.task == task_id)
+
+
+def allocator_checks(method: str | Allocator, *,
+                     instances: Mapping[str, Instance] | None = None) -> list[Check]:
+    """Every conformance check of ``method``; ``instances`` (name -> instance) replaces the
+    generated ones that plans are checked on."""
+    name = _method_name(method)
+    instances = dict(small_instances() if instances is None else instances)
+    edge = edge_cases()
+    timed = small_instances()["gen-4-10-s5"]
+    seeded = small_instances()["gen-2-5-s2"]
+    checks: list[Check] = []
+
+    def add(check_name: str, body: Callable[[], None]) -> None:
+        checks.append(Check(check_name, method, body))
+
+    def undeclared_mode_refused() -> None:
+        unsupported = [m for m in ALL_MODES if m not in _declared_modes(method)]
+        if not unsupported:
+            raise CheckSkipped(f"{name} plans every mode")
+        try:
+            solve(edge["one-aav"], method, mode=unsupported[0])
+        except TsacBenchError as exc:
+            assert f"not '{unsupported[0]}'" in str(exc), str(exc)
+        else:
+            raise AssertionError(f"a {unsupported[0]} run of {name} was not refused")
+
+    add("undeclared-mode-refused", undeclared_mode_refused)
+
+    def feasible_and_scored(instance: Instance, mode: str) -> None:
+        outcome = _run(method, instance, mode)
+        assert outcome.solution.meta["method"] == name
+        assert outcome.solution.meta["mode"] == mode
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder) / "solution.json"
+            write_solution(outcome.solution, instance, path)
+            again = read_solution(path, instance)
+        assert CostEvaluator(instance).cost(again) == outcome.cost == again.cost
+
+    for mode in ALL_MODES:
+        for label, instance in instances.items():
+            add(f"feasible-and-scored[{label}-{mode}]",
+                lambda i=instance, m=mode: feasible_and_scored(i, m))
+
+    def records_every_planning_moment() -> None:
+        instance = small_instances()["gen-3-6-s3"]
+        outcome = _run(method, instance, "dynamic")
+        replans = outcome.stats["replans"]
+        events = sorted({t.release for t in instance.tasks if t.release > 0})
+        assert [r["time"] for r in replans] == [0.0, *events]
+        assert abs(replans[-1]["J"] - outcome.cost) <= 1e-12 * max(1.0, outcome.cost)
+
+    add("dynamic-run-records-every-planning-moment", records_every_planning_moment)
+
+    def respects_its_time_budget() -> None:
+        outcome = _run(method, timed, "static", time_limit=1.0)
+        assert outcome.wall_time <= BUDGET_FACTOR * 1.0 + BUDGET_SLACK, outcome.wall_time
+
+    add("respects-its-time-budget", respects_its_time_budget)
+
+    def same_seed_same_result(mode: str) -> None:
+        first, second = (_run(method, seeded, mode, seed=7), _run(method, seeded, mode, seed=7))
+        assert first.solution.routes == second.solution.routes
+        assert first.cost == second.cost
+
+    def no_tasks(mode: str) -> None:
+        outcome = _run(method, edge["no-tasks"], mode)
+        assert outcome.cost == 0.0
+        assert all(route == () for route in outcome.solution.routes)
+
+    def one_aav(mode: str) -> None:
+        instance = edge["one-aav"]
+        # A 30 kg AAV with 35 kg of reachable, unhurried work serves some of it.
+        assert _run(method, instance, mode).cost < instance.unserved_task_cost * instance.n_tasks
+
+    def unreachable_task(mode: str) -> None:
+        instance = edge["unreachable"]
+        breakdown = {b.task: b for b in _run(method, instance, mode).evaluation.per_task}
+        assert breakdown["T1"].cost.load == 1.0
+        assert breakdown["T1"].cost.total >= instance.unserved_task_cost
+        assert breakdown["T0"].cost.load < 1.0  # the reachable task is still served
+
+    def demand_beyond_the_fleet(mode: str) -> None:
+        instance = edge["over-demand"]
+        load = _load_share(_run(method, instance, mode), "T0")
+        capacity = sum(a.capacity for a in instance.aavs)
+        # Each AAV visits T0 at most once, so at most 40 of the 500 kg are ever covered; a
+        # method still sends what it can.
+        assert 1 - capacity / 500 - 1e-12 <= load < 1.0
+
+    for mode in ALL_MODES:
+        add(f"same-seed-same-result[{mode}]", lambda m=mode: same_seed_same_result(m))
+        add(f"no-tasks[{mode}]", lambda m=mode: no_tasks(m))
+        add(f"one-aav[{mode}]", lambda m=mode: one_aav(m))
+        add(f"unreachable-task[{mode}]", lambda m=mode: unreachable_task(m))
+        add(f"demand-beyond-the-fleet[{mode}]", lambda m=mode: demand_beyond_the_fleet(m))
+
+    def all_tasks_released_late() -> None:
+        instance = edge["all-late"]
+        outcome = _run(method, instance, "dynamic")
+        first = outcome.stats["replans"][0]
+        assert first["time"] == 0.0 and first["visible"] == 0
+        assert first["J"] == instance.unserved_task_cost * instance.n_tasks
+        assert [r["time"] for r in outcome.stats["replans"]] == [0.0, 200.0, 400.0]
+        assert outcome.cost < instance.unserved_task_cost * instance.n_tasks
+
+    add("all-tasks-released-late", all_tasks_released_late)
+    return checks
+
+
+def check_allocator(method: str | Allocator, *,
+                    instances: Mapping[str, Instance] | None = None) -> dict[str, str]:
+    """Run every check; returns check name -> "passed" or "skipped: why". The first failure
+    raises ``AssertionError`` naming the check."""
+    results = {}
+    for check in allocator_checks(method, instances=instances):
+        try:
+            check()
+        except CheckSkipped as exc:
+            results[check.name] = f"skipped: {exc}"
+        except AssertionError as exc:
+            raise AssertionError(f"{check}: {exc}") from exc
+        else:
+            results[check.name] = "passed"
+    return results

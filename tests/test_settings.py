@@ -223,3 +223,13 @@ def test_an_undeclared_setting_reaches_the_method_as_given(monkeypatch):
     assert make_allocator("test-undeclared:level=3").settings() == {"level": "3"}
     with pytest.raises(InvalidSetting, match="has no setting 'depth'; its settings: level"):
         make_allocator("test-undeclared", depth=1)
+
+
+def test_a_range_that_names_another_setting_is_described_with_its_given_value():
+    with pytest.raises(InvalidSetting, match=r"setting 'elite': got 'x'; allowed: an integer "
+                                             r"in \[0, population=4\)"):
+        make_allocator("dga:population=4:elite=x")
+    with pytest.raises(InvalidSetting, match=r"setting 'elite': got 4; allowed: an integer "
+                                             r"in \[0, population=4\)"):
+        make_allocator("dga", population=4, elite=4)
+    assert make_allocator("dga:population=4:elite=3:migrants=3").settings()["elite"] == 3

@@ -223,14 +223,17 @@ def check_settings(method: str, cls: Callable[..., Any],
         return InvalidSetting(f"method {method!r} setting {name!r}: got {value!r}{default}; "
                               f"allowed: {constraints[name].describe(context)}")
 
-    converted = dict(settings)
+    converted, refused = dict(settings), []
     for name, value in settings.items():
         if name in constraints:
             try:
                 converted[name] = constraints[name].convert(value)
             except Refused:
-                raise refuse(name, value, defaults) from None
+                refused.append(name)
+    # The range described with the other given settings (elite's with the given population).
     context = {**defaults, **converted}
+    if refused:
+        raise refuse(refused[0], settings[refused[0]], context)
     # A given setting, and a default whose range depends on a given one (elite < population).
     for name, constraint in constraints.items():
         checked = name in settings or set(constraint.depends_on()) & set(settings)

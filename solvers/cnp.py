@@ -25,7 +25,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from tsac_bench.errors import InvalidSetting
 from tsac_bench.model import Route
 from tsac_bench.model.evaluator import (
     TIME_TOLERANCE,
@@ -35,7 +34,7 @@ from tsac_bench.model.evaluator import (
     Proposal,
     RouteTrace,
 )
-from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning import Options, PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import best_insertion
 
 #: A bid must lower J by more than float noise to count.
@@ -152,11 +151,9 @@ class ContractNetManager:
 
 class ContractNetAllocator(Settings):
     name = "cnp"
+    setting_constraints = declare(commitment=Options(*COMMITMENTS))
 
     def __init__(self, commitment: str = "arrival") -> None:
-        if commitment not in COMMITMENTS:
-            raise InvalidSetting(f"cnp setting commitment: must be one of "
-                                 f"{', '.join(COMMITMENTS)}; got {commitment!r}")
         self.commitment = commitment
 
     def plan(self, state: PlanningState, *, seed: int = 0,

@@ -38,10 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from tsac_bench.errors import InvalidSetting
 from tsac_bench.model import Route, Visit
 from tsac_bench.model.evaluator import CostEvaluator, PlanState
-from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning import Interval, PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import best_insertion, removal_route
 
 #: A change must lower J by more than float noise to count as an improvement.
@@ -276,26 +275,25 @@ def _evolve_in_worker(population: list[Individual] | None, size: int,
 
 class DGAAllocator(Settings):
     name = "dga"
+    setting_constraints = declare(
+        islands=Interval(int, 1, None),
+        population=Interval(int, 1, None),
+        generations=Interval(int, 0, None),
+        migration_interval=Interval(int, 1, None),
+        # Elites and migrants are drawn from one island's population, never all of it.
+        migrants=Interval(int, 0, "population", closed="left"),
+        crossover_rate=Interval(float, 0, 1),
+        mutation_rate=Interval(float, 0, 1),
+        tournament=Interval(int, 1, None),
+        elite=Interval(int, 0, "population", closed="left"),
+        candidates=Interval(int, 1, None),
+        workers=Interval(int, 0, None),
+    )
 
     def __init__(self, islands: int = 2, population: int = 8, generations: int = 25,
                  migration_interval: int = 5, migrants: int = 1, crossover_rate: float = 0.9,
                  mutation_rate: float = 0.5, tournament: int = 2, elite: int = 1,
                  candidates: int = 6, workers: int = 0) -> None:
-        for name, value, low in (("islands", islands, 1), ("population", population, 1),
-                                 ("generations", generations, 0),
-                                 ("migration_interval", migration_interval, 1),
-                                 ("migrants", migrants, 0), ("tournament", tournament, 1),
-                                 ("elite", elite, 0), ("candidates", candidates, 1),
-                                 ("workers", workers, 0)):
-            if type(value) is not int or value < low:
-                raise InvalidSetting(f"dga setting {name}: must be an integer >= {low}, "
-                                     f"got {value!r}")
-        for name, rate in (("crossover_rate", crossover_rate), ("mutation_rate", mutation_rate)):
-            if not 0.0 <= rate <= 1.0:
-                raise InvalidSetting(f"dga setting {name}: must lie in [0, 1], got {rate!r}")
-        if elite >= population or migrants >= population:
-            raise InvalidSetting("dga settings elite and migrants: each must be smaller than "
-                                 f"population={population}")
         self.islands = islands
         self.population = population
         self.generations = generations

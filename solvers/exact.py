@@ -21,7 +21,15 @@ from typing import Any
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.model.evaluator import CostEvaluator, costs_agree
-from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning import (
+    Boolean,
+    Interval,
+    NoneOr,
+    PlanningState,
+    PlanResult,
+    Settings,
+    declare,
+)
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 
@@ -39,6 +47,13 @@ class ExactAllocator(Settings):
 
     name = "exact"
     proves_optimality = True
+    setting_constraints = declare(
+        time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
+        threads=Interval(int, 1, None),
+        mip_rel_gap=Interval(float, 0, 1),
+        **{option: Boolean() for option in ("warm_start", "symmetry", "capacity_cuts",
+                                            "range_time_link", "time_flow", "cover_cuts")},
+    )
 
     def __init__(self, time_limit: float | None = None, threads: int = 1,
                  mip_rel_gap: float = 1e-9, warm_start: bool = True,
@@ -100,6 +115,12 @@ class CpSatAllocator(Settings):
     name = "exact-cpsat"
     proves_optimality = True
     modes = ("static",)
+    setting_constraints = declare(
+        time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
+        threads=Interval(int, 1, None),
+        rel_gap=Interval(float, 0, 1),
+        warm_start=Boolean(),
+    )
 
     def __init__(self, time_limit: float | None = None, threads: int = 1,
                  rel_gap: float = 0.0, warm_start: bool = True) -> None:

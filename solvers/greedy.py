@@ -15,7 +15,7 @@ import time
 from collections.abc import Iterable
 
 from tsac_bench.model.evaluator import CostEvaluator, PlanState
-from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning import PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import best_insertion
 
 
@@ -49,6 +49,7 @@ def deadline_order(state: PlanningState) -> list[int]:
 
 class GreedyAllocator(Settings):
     name = "greedy"
+    setting_constraints = declare()
 
     def __init__(self) -> None:
         pass

@@ -28,7 +28,7 @@ import pyvrp
 
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.model.evaluator import CostEvaluator
-from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning import Interval, NoneOr, PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import removal_route, top_up
 from tsac_bench.solvers.greedy import deadline_order, insert_cheapest
 
@@ -39,6 +39,12 @@ COST_SCALE = 1_000_000
 
 class PyVRPAllocator(Settings):
     name = "pyvrp"
+    setting_constraints = declare(
+        max_iterations=Interval(int, 1, None),
+        time_limit=Interval(float, 0, None, closed="neither"),
+        piece_size=NoneOr(Interval(int, 1, None)),
+        duration_weight=Interval(float, 0, None),
+    )
 
     def __init__(self, max_iterations: int = 1000, time_limit: float = 10.0,
                  piece_size: int | None = None, duration_weight: float = 10.0) -> None:

@@ -56,13 +56,6 @@ def test_unknown_method_exit_2(data_dir):
     assert "unknown method 'nope'" in result.output
 
 
-def test_set_values_are_read_as_json_where_they_parse():
-    from tsac_bench.cli import parse_settings
-
-    assert parse_settings(["threads=2", "warm_start=false", "rel_gap=0.5", "name=abc"]) == {
-        "threads": 2, "warm_start": False, "rel_gap": 0.5, "name": "abc"}
-
-
 def test_solve_passes_settings_and_names_an_unknown_one(tmp_path, data_dir):
     out = tmp_path / "exact.json"
     result = invoke("solve", data_dir / "hand.json", "--method", "exact", "--set", "threads=2",

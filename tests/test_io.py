@@ -1,4 +1,6 @@
 import json
+import math
+from pathlib import Path
 
 import pytest
 
@@ -123,3 +125,97 @@ def test_a_walk_skips_sweep_sets_unless_they_are_named(tmp_path, hand):
     assert iter_instance_files([tmp_path]) == [tmp_path / "quick" / "hand.json"]
     assert iter_instance_files([tmp_path / "big"]) == [tmp_path / "big" / "hand.json"]
     assert sweep_sets_below(tmp_path) == [tmp_path / "big"]
+
+
+def numeric_fields(schema, document, path=()):
+    """The path of every number the file schema ``schema`` declares, found by walking its
+    types (lists and dicts entered at their first item of ``document``, tuples at each);
+    ``Any`` (a visit's amount, ruled on by the evaluator; ``meta``) is no number field."""
+    import types
+    import typing
+
+    from pydantic import BaseModel
+
+    origin, args = typing.get_origin(schema), typing.get_args(schema)
+    if isinstance(schema, type) and issubclass(schema, BaseModel):
+        for name, field in schema.model_fields.items():
+            yield from numeric_fields(field.annotation, (document or {}).get(name),
+                                      (*path, name))
+    elif origin is typing.Annotated:
+        yield from numeric_fields(args[0], document, path)
+    elif origin in (typing.Union, types.UnionType):
+        members = [a for a in args if a is not type(None)]
+        if any(m in (int, float) for m in members):
+            yield path
+        else:
+            for member in members:
+                yield from numeric_fields(member, document, path)
+    elif origin is list:
+        yield from numeric_fields(args[0], document[0], (*path, 0))
+    elif origin is tuple:
+        for k, member in enumerate(args):
+            yield from numeric_fields(member, document[k], (*path, k))
+    elif origin is dict and args[1] is not typing.Any:
+        key = next(iter(document))
+        yield from numeric_fields(args[1], document[key], (*path, key))
+    elif schema in (int, float):
+        yield path
+
+
+def _field_text(path):
+    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+
+
+def _put(document, path, value):
+    for part in path[:-1]:
+        document = document[part]
+    if isinstance(document, list) and len(document) <= path[-1]:
+        document.append(value)
+    else:
+        document[path[-1]] = value
+
+
+def _non_finite_cases():
+    from tsac_bench.model.io import InstanceRecord, SolutionRecord
+
+    hand = read_instance(Path(__file__).parent / "data" / "hand.json")
+    instance = instance_to_dict(hand)
+    solution = solution_to_dict(Solution.from_ids(hand, {"A0": [("T0", 5), "D0"]}, cost=1.0),
+                                hand)
+    for kind, schema, document in (("instance", InstanceRecord, instance),
+                                   ("solution", SolutionRecord, solution)):
+        for path in numeric_fields(schema, document):
+            for value in (math.nan, math.inf, -math.inf):
+                yield pytest.param(kind, document, path, value,
+                                   id=f"{kind}:{_field_text(path)}={value}")
+
+
+NON_FINITE = list(_non_finite_cases())
+
+
+def test_the_non_finite_cases_cover_every_numeric_field():
+    fields = {(case.values[0], _field_text(case.values[2])) for case in NON_FINITE}
+    assert {("instance", "tasks[0].t_end"), ("instance", "weights[2]"),
+            ("instance", "aavs[0].lam"), ("instance", "tasks[0].release"),
+            ("instance", "seed"), ("solution", "cost")} <= fields
+    assert len(fields) == 8 + 2 + 6 + 5 + 1  # aavs, depots, tasks, top level, cost
+
+
+@pytest.mark.parametrize(("kind", "document", "path", "value"), NON_FINITE)
+def test_non_finite_numbers_are_one_line_naming_file_and_field(tmp_path, data_dir, kind,
+                                                               document, path, value):
+    from typer.testing import CliRunner
+
+    from tsac_bench.cli import app
+
+    broken = json.loads(json.dumps(document))
+    _put(broken, path, value)
+    file = tmp_path / f"{kind}.json"
+    file.write_text(json.dumps(broken))  # json writes NaN, Infinity, -Infinity
+    args = (["info", file] if kind == "instance"
+            else ["evaluate", data_dir / "hand.json", file])
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {file}: {_field_text(path)}: ")
+    assert lines[0].endswith(f"got {value!r}")

@@ -12,7 +12,7 @@ from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
-from rich.table import Table
+from rich.table import Column, Table
 
 from tsac_bench.batch.worker import GRACE_SECONDS
 from tsac_bench.errors import TsacBenchError
@@ -138,25 +138,12 @@ def _print_breakdown(result: Any) -> None:
                   f"{terms['time']:.4f} + w3*op {terms['op']:.4f})")
 
 
-def parse_settings(pairs: list[str]) -> dict[str, Any]:
-    """``NAME=VALUE`` pairs as keywords; a VALUE that is not JSON stays a string."""
-    settings: dict[str, Any] = {}
-    for pair in pairs:
-        name, sep, text = pair.partition("=")
-        if not sep or not name.strip():
-            raise TsacBenchError(f"--set {pair!r}: expected NAME=VALUE")
-        try:
-            settings[name.strip()] = json.loads(text)
-        except json.JSONDecodeError:
-            settings[name.strip()] = text
-    return settings
-
-
 @app.command()
 @user_errors
 def solve(
     instance_path: Annotated[Path, typer.Argument(metavar="INSTANCE")],
-    method: Annotated[str, typer.Option(help="method name (see `tsac-bench methods`)")]
+    method: Annotated[str, typer.Option(help="method name (see `tsac-bench methods`) or spec "
+                                        "NAME:KEY=VALUE..., e.g. hocf:init=incumbent")]
     = "greedy",
     seed: Annotated[int, typer.Option()] = 0,
     time_limit: Annotated[float | None, typer.Option(help="seconds")] = None,
@@ -167,18 +154,22 @@ def solve(
                                          "of the routes found (cvxpy + HiGHS)")] = False,
     setting: Annotated[list[str] | None, typer.Option(
         "--set", metavar="NAME=VALUE", help="a setting of the method (its constructor "
-        "keyword), repeatable; VALUE is read as JSON where it parses, e.g. --set threads=2")]
+        "keyword), repeatable, e.g. --set threads=2; VALUE is read by the setting's declared "
+        "type (true, none, 0.5)")]
     = None,
 ) -> None:
     """Run one method on one instance and print J (dynamic: also J after each re-plan).
 
     --time-limit is the budget of each plan call."""
     from tsac_bench.model.io import read_instance, write_solution
+    from tsac_bench.planning import parse_method_spec, resolve_spec
+    from tsac_bench.planning.settings import parse_setting_pairs
     from tsac_bench.planning.solve import solve as run_solve
 
+    spec = resolve_spec(parse_method_spec(method).with_settings(
+        parse_setting_pairs(setting or [], "--set")))
     instance = read_instance(instance_path)
-    outcome = run_solve(instance, method, seed=seed, time_limit=time_limit, mode=mode,
-                        settings=parse_settings(setting or []))
+    outcome = run_solve(instance, spec, seed=seed, time_limit=time_limit, mode=mode)
     solution = outcome.solution
     if mode == "dynamic":
         table = Table("t (s)", "released", "visible", "committed", "J known before",
@@ -189,13 +180,13 @@ def solve(
                           str(r["committed"]), "-" if before is None else f"{before:.4f}",
                           f"{r['J_known']:.4f}", f"{r['J']:.4f}", f"{r['wall_time']:.3f}")
         console.print(table)
-    console.print(f"{instance.name}  {method}  {mode}  J = {outcome.cost:.6f}  "
+    console.print(f"{instance.name}  {spec.label}  {mode}  J = {outcome.cost:.6f}  "
                   f"({outcome.wall_time:.3f} s)")
     if polish:
         from tsac_bench.planning.polish import polish as polish_solution
 
         solution = polish_solution(instance, solution)
-        console.print(f"{instance.name}  {method}+polish  J = {solution.cost:.6f}")
+        console.print(f"{instance.name}  {spec.label}+polish  J = {solution.cost:.6f}")
     if out is not None:
         write_solution(solution, instance, out)
 
@@ -261,8 +252,9 @@ app.add_typer(results_app, name="results")
 def run(
     paths: Annotated[list[Path], typer.Argument(metavar="PATH...", help="instance files or "
                                                 "directories (searched recursively)")],
-    methods: Annotated[str | None, typer.Option(help="comma-separated methods (default: every "
-                                                "available one)")] = None,
+    methods: Annotated[str | None, typer.Option(help="comma-separated methods or specs "
+                                                "NAME:KEY=VALUE... (default: every available "
+                                                "method)")] = None,
     mode: Annotated[str, typer.Option(help="static, dynamic, both, or auto (static, plus "
                                       "dynamic where supported)")] = "auto",
     seeds: Annotated[int, typer.Option(min=1, help="seeds 0..N-1 per job")] = 1,
@@ -321,7 +313,9 @@ def _print_summary(run_dir: Path) -> None:
         say_error(f"warning: {row.key}: J = {row.J:.6f} is below the exact reference "
                   f"(J* {row.J_star}, LB {row.lower_bound}): a bug in an exact model, the "
                   "evaluator or the simulator, or a wrong manifest")
-    table = Table("mode", "scale", "method", "jobs", "failed", "mean J", "mean gap to J*",
+    # A spec label's end tells variants apart: fold it rather than cut it off.
+    table = Table("mode", "scale", Column("method", overflow="fold"), "jobs", "failed", "mean J",
+                  "mean gap to J*",
                   title="Summary (J: mean over instances of the mean over seeds)")
     for row in summary(frame).itertuples():
         gap = (f"{row.gap_mean:.2%}" if row.gap_n

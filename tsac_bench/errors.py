@@ -39,4 +39,5 @@ class UnknownMethodError(TsacBenchError, KeyError):
 
 
 class InvalidSetting(TsacBenchError, ValueError):
-    """A method setting outside its documented range."""
+    """A method setting that the method does not take, or a value its declared constraint
+    does not admit (``tsac_bench.planning.settings``)."""

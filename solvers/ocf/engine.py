@@ -45,7 +45,7 @@ import numpy as np
 
 from tsac_bench.model import Route
 from tsac_bench.model.evaluator import CostEvaluator, PlanState, Proposal
-from tsac_bench.planning import PlanningState, PlanResult, Settings
+from tsac_bench.planning import Interval, Options, PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import best_insertion, removal_route
 
 #: A move must lower J by more than this to count as a strict decrease (Eq. 22): J is a sum
@@ -356,13 +356,11 @@ class OCFAllocator(Settings, ABC):
     ``"greedy"`` (the ``greedy`` method's plan of this planning state)."""
 
     name: ClassVar[str]
+    setting_constraints = declare(k_max=Interval(int, 0, None), c_max=Interval(int, 1, None),
+                                  init=Options(*INITS))
 
     def __init__(self, k_max: int = 200_000, c_max: int = 5_000,
                  init: str = "empty") -> None:
-        if k_max < 0 or c_max < 1:
-            raise ValueError("k_max must be >= 0 and c_max >= 1")
-        if init not in INITS:
-            raise ValueError(f"init must be one of {', '.join(INITS)}, got {init!r}")
         self.k_max = k_max
         self.c_max = c_max
         self.init = init

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from tsac_bench.model import Instance
-from tsac_bench.planning import PlanningState
+from tsac_bench.planning import Interval, PlanningState, declare
 from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
 
 
@@ -68,6 +68,10 @@ class HeuristicSelection:
 
 class HOCFAllocator(OCFAllocator):
     name = "hocf"
+    # A negative weight would turn a criterion of the priority into its opposite.
+    setting_constraints = declare(**OCFAllocator.setting_constraints,
+                                  **{w: Interval(float, 0, None)
+                                     for w in ("w_urgency", "w_distance", "w_residual")})
 
     def __init__(self, w_urgency: float = 1.0, w_distance: float = 2.0,
                  w_residual: float = 1.0, k_max: int = 200_000, c_max: int = 5_000,

@@ -19,7 +19,14 @@ import numpy as np
 import torch
 
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.planning import PlanningState, PlanResult
+from tsac_bench.planning import (
+    ExistingFile,
+    Interval,
+    NoneOr,
+    PlanningState,
+    PlanResult,
+    declare,
+)
 from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
 from tsac_bench.solvers.tsac.env import observe
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate
@@ -93,12 +100,13 @@ class TSACOCFAllocator(OCFAllocator):
     the engine's ``k_max``, ``c_max``, ``init``."""
 
     name = "tsac-ocf"
+    setting_constraints = declare(**OCFAllocator.setting_constraints,
+                                  policy=NoneOr(ExistingFile()),
+                                  temperature=Interval(float, 0, None))
 
     def __init__(self, policy: str | None = None, temperature: float = 1.0,
                  k_max: int = 200_000, c_max: int = 5_000, init: str = "incumbent") -> None:
         super().__init__(k_max=k_max, c_max=c_max, init=init)
-        if temperature < 0:
-            raise ValueError("temperature must be >= 0")
         self.policy = policy
         self.temperature = temperature
 

@@ -204,3 +204,82 @@ def test_default_time_limits_grow_with_the_task_count():
     assert default_time_limit("greedy", 80) == 16.0
     assert default_time_limit("exact", 10) == 10.0
     assert default_time_limit("exact-cpsat", 40) == 40.0
+
+
+def test_method_specs_are_jobs_of_their_own_and_a_store_of_plain_names_resumes(
+        tmp_path, two_instances, cli):
+    out = tmp_path / "run"
+    common = ["--mode", "dynamic", "--jobs", "2", "--no-progress", "--out", out]
+    first = cli("run", two_instances, "--methods", "hocf", "--no-report", *common)
+    assert first.returncode == 0, first.stderr
+    before = rows_by_key(out)
+    # The keys of a store written before method specs existed: the name alone.
+    assert sorted(before) == ["quick-2-4-s1|hocf|dynamic|0", "quick-2-5-s2|hocf|dynamic|0"]
+
+    both = cli("run", two_instances, "--methods", "hocf,hocf:init=incumbent,hocf",
+               "--report-out", tmp_path / "report", *common)
+    assert both.returncode == 0, both.stderr
+    assert "2 job(s) run, 2 already recorded, 0 failed" in both.stdout
+    after = rows_by_key(out)
+    for key, row in before.items():
+        assert after[key]["finished_at"] == row["finished_at"]
+    assert sorted(after) == sorted([*before, "quick-2-4-s1|hocf:init=incumbent|dynamic|0",
+                                    "quick-2-5-s2|hocf:init=incumbent|dynamic|0"])
+    for row in after.values():
+        assert row["status"] == "ok"
+        init = "incumbent" if row["method"] == "hocf:init=incumbent" else "empty"
+        assert row["settings"]["init"] == init
+        solution = json.loads((out / row["solution_file"]).read_text())
+        assert solution["meta"]["settings"]["init"] == init
+        assert solution["cost"] == row["J"]
+    assert {Path(r["solution_file"]).name for r in after.values()} == {
+        "hocf-dynamic-s0.json", "hocf+init=incumbent-dynamic-s0.json"}
+
+    tables = tmp_path / "report" / "tables"
+    summary = pd.read_csv(tables / "summary.csv")
+    assert set(summary["method"]) == {"hocf", "hocf:init=incumbent"}
+    markdown = (tables / "summary-dynamic.md").read_text()
+    latex = (tables / "summary-dynamic.tex").read_text()
+    for label in ("hocf", "hocf:init=incumbent"):
+        assert f"| {label} " in markdown
+        assert f"& {label} &" in latex
+    # One instance per scale and one seed: each cell's mean J is that job's J.
+    cells = summary.set_index(["scale", "method"])["J_mean"].to_dict()
+    assert cells == {(r["scale"], r["method"]): pytest.approx(r["J"], rel=1e-12)
+                     for r in after.values()}
+
+
+@pytest.mark.parametrize(("methods", "message"), [
+    ("greedy,hocf:init=foo", "error: method 'hocf' setting 'init': got 'foo'; allowed: one of "
+                             "'empty', 'incumbent', 'greedy'"),
+    ("exact-cpsat:threads=zero", "error: method 'exact-cpsat' setting 'threads': got 'zero'; "
+                                 "allowed: an integer >= 1"),
+    ("hocf:k_max", "error: method spec 'hocf:k_max': 'k_max': expected KEY=VALUE"),
+    ("dga:size=3", "error: method 'dga' has no setting 'size'; its settings: islands, "),
+])
+def test_a_bad_spec_is_one_line_and_runs_nothing(tmp_path, two_instances, cli, methods,
+                                                 message):
+    result = cli("run", two_instances, "--methods", methods, "--out", tmp_path / "run")
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(message), result.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_jobs_of_a_spec_take_the_modes_and_time_limits_of_its_method(two_instances):
+    from tsac_bench.batch.runner import load_instances, plan_jobs, resolve_methods
+
+    loaded, _ = load_instances([two_instances])
+    methods, _ = resolve_methods(["exact-cpsat:threads=2", "hocf:k_max=3", "hocf:k_max=03"])
+    jobs = plan_jobs(loaded, methods, ["static", "dynamic"], 1, None)
+    cells = sorted((j.row["instance"], j.row["method"], j.row["mode"], j.row["time_limit"])
+                   for j in jobs)
+    assert cells == sorted((instance, label, mode, limit)
+                           for instance in ("quick-2-4-s1", "quick-2-5-s2")
+                           for label, mode, limit in (
+                               ("exact-cpsat:threads=2", "static", 10.0),
+                               ("hocf:k_max=3", "static", 2.0),
+                               ("hocf:k_max=3", "dynamic", 2.0)))
+    for job in jobs:  # the worker builds the method from its name and converted settings
+        assert (job.spec["method"], job.spec["settings"]) in (("exact-cpsat", {"threads": 2}),
+                                                             ("hocf", {"k_max": 3}))

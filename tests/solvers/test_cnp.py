@@ -8,7 +8,7 @@ from tsac_bench.model import Instance, Visit
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import generate
 from tsac_bench.model.io import instance_from_dict
-from tsac_bench.planning import PlanningState
+from tsac_bench.planning import PlanningState, make_allocator
 from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.cnp import ContractNetAllocator, ContractNetManager
 
@@ -147,5 +147,6 @@ def test_warm_routes_drop_tasks_no_longer_visible(paper_x20):
 
 
 def test_unknown_commitment_is_a_clear_error():
-    with pytest.raises(InvalidSetting, match="commitment"):
-        ContractNetAllocator(commitment="never")
+    with pytest.raises(InvalidSetting, match="method 'cnp' setting 'commitment': got 'never'; "
+                                             "allowed: one of 'arrival', 'deadline'"):
+        make_allocator("cnp", commitment="never")

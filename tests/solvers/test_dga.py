@@ -8,7 +8,7 @@ from tsac_bench.model import Visit
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import generate
 from tsac_bench.model.io import instance_from_dict
-from tsac_bench.planning import PlanningState
+from tsac_bench.planning import PlanningState, make_allocator
 from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.dga import DGAAllocator
 
@@ -94,8 +94,17 @@ def test_a_spent_time_budget_returns_the_initial_population_best():
     assert CostEvaluator(state.instance).evaluate(result.routes).feasible
 
 
-@pytest.mark.parametrize("settings", [{"islands": 0}, {"population": 2, "elite": 2},
-                                      {"mutation_rate": 1.5}, {"candidates": 2.5}])
-def test_bad_settings_are_clear_errors(settings):
-    with pytest.raises(InvalidSetting, match="dga setting"):
-        DGAAllocator(**settings)
+@pytest.mark.parametrize(("settings", "message"), [
+    ({"islands": 0}, "setting 'islands': got 0; allowed: an integer >= 1"),
+    ({"population": 2, "elite": 2}, "setting 'elite': got 2; allowed: an integer in "
+                                    "[0, population=2)"),
+    # The default elite (1) no longer fits a population of one.
+    ({"population": 1}, "setting 'migrants': got 1 (its default); allowed: an integer in "
+                        "[0, population=1)"),
+    ({"mutation_rate": 1.5}, "setting 'mutation_rate': got 1.5; allowed: a number in [0, 1]"),
+    ({"candidates": 2.5}, "setting 'candidates': got 2.5; allowed: an integer >= 1"),
+])
+def test_bad_settings_are_clear_errors(settings, message):
+    with pytest.raises(InvalidSetting, match="method 'dga' ") as caught:
+        make_allocator("dga", **settings)
+    assert message in str(caught.value)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from solver_cases import DEPOTS, aav, edge_cases, paper_x20, quick, task
 
+from tsac_bench.errors import InvalidSetting
 from tsac_bench.model import Instance, Visit
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import generate
@@ -246,7 +247,8 @@ def test_allocator_result_and_settings(method):
     assert outcome.solution.meta["settings"]["init"] == "empty"
     again = solve(instance, method, seed=5)
     assert again.solution.routes == outcome.solution.routes
-    with pytest.raises(ValueError, match="init must be one of"):
+    with pytest.raises(InvalidSetting, match=f"method '{method}' setting 'init': got 'random'; "
+                                             "allowed: one of 'empty', 'incumbent', 'greedy'"):
         make_allocator(method, init="random")
 
 

@@ -32,10 +32,12 @@ from tsac_bench.errors import InputError, TsacBenchError
 from tsac_bench.model import Instance
 from tsac_bench.planning import (
     ALL_MODES,
+    MethodSpec,
     MethodUnavailable,
     allocator_class,
     available_methods,
     is_exact_method,
+    resolve_spec,
     supported_modes,
 )
 
@@ -48,7 +50,8 @@ DEFAULT_EXACT_TIME_LIMIT = 10.0
 
 
 def default_time_limit(method: str, n_tasks: int) -> float:
-    """The time limit a job gets without --time-limit: grows linearly with the task count."""
+    """The time limit a job of ``method`` (a name) gets without --time-limit: grows linearly
+    with the task count."""
     per_ten = DEFAULT_EXACT_TIME_LIMIT if is_exact_method(method) else DEFAULT_TIME_LIMIT
     return per_ten * max(1.0, n_tasks / 10)
 
@@ -121,15 +124,16 @@ def load_instances(paths: Sequence[Path]) -> tuple[list[LoadedInstance], list[st
     return loaded, problems
 
 
-def resolve_methods(requested: Sequence[str] | None) -> tuple[list[str], list[str]]:
-    """The methods to run and notes on the ones left out.
+def resolve_methods(requested: Sequence[str] | None) -> tuple[list[MethodSpec], list[str]]:
+    """The method specs to run (settings checked, one per label) and notes on the methods
+    left out.
 
-    Named methods must exist and be importable (a typo is an error, not 100 failed jobs);
-    by default every available method runs and the unavailable ones are noted."""
+    Named methods must exist and be importable and their settings valid (a typo is an error,
+    not 100 failed jobs); by default every available method runs with its default settings
+    and the unavailable ones are noted."""
     if requested:
-        for name in requested:
-            allocator_class(name)  # raises UnknownMethodError / MethodUnavailable
-        return list(dict.fromkeys(requested)), []
+        specs = [resolve_spec(text) for text in requested]  # raises for any bad spec
+        return list({spec.label: spec for spec in specs}.values()), []
     methods, notes = [], []
     for name in available_methods():
         try:
@@ -140,7 +144,7 @@ def resolve_methods(requested: Sequence[str] | None) -> tuple[list[str], list[st
         except Exception as exc:  # a broken plug-in must not stop the built-in methods
             notes.append(f"skipped method {name}: cannot load it: {type(exc).__name__}: {exc}")
             continue
-        methods.append(name)
+        methods.append(MethodSpec(name))
     return methods, notes
 
 
@@ -154,28 +158,32 @@ def resolve_modes(mode: str) -> list[str]:
     raise TsacBenchError(f"--mode: expected one of {', '.join(MODE_CHOICES)}, got {mode!r}")
 
 
-def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[str],
+def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec],
               modes: Sequence[str], seeds: int, time_limit: float | None,
               grace: float = GRACE_SECONDS) -> list[Job]:
+    """One job per (instance, method spec, mode, seed). A job's ``method`` in the store is the
+    spec's label (the name alone without settings, so stores of plain names resume)."""
     jobs = []
     for loaded in instances:
         instance = loaded.instance
         for method in methods:
             limit = (time_limit if time_limit is not None
-                     else default_time_limit(method, instance.n_tasks))
+                     else default_time_limit(method.name, instance.n_tasks))
+            modes_of_method = supported_modes(allocator_class(method.name))
             # A method that plans only some modes gets no job in the others (not a failure).
-            for mode in (m for m in modes if m in supported_modes(allocator_class(method))):
+            for mode in (m for m in modes if m in modes_of_method):
                 for seed in range(seeds):
-                    key = job_key(instance.name, method, mode, seed)
+                    key = job_key(instance.name, method.label, mode, seed)
                     spec = {"key": key, "instance": loaded.data, "instance_file": str(loaded.path),
-                            "method": method, "mode": mode, "seed": seed, "time_limit": limit,
-                            "settings": {}, "grace": grace}
+                            "method": method.name, "mode": mode, "seed": seed,
+                            "time_limit": limit, "settings": dict(method.settings),
+                            "grace": grace}
                     row = {"key": key, "instance": instance.name,
                            "instance_set": loaded.instance_set,
                            "instance_file": str(loaded.path), "scale": instance.scale,
                            "n_aavs": instance.n_aavs, "n_tasks": instance.n_tasks,
-                           "method": method, "mode": mode, "seed": seed,
-                           "settings": {}, "time_limit": limit,
+                           "method": method.label, "mode": mode, "seed": seed,
+                           "settings": dict(method.settings), "time_limit": limit,
                            "J_star": loaded.reference.J_star,
                            "lower_bound": loaded.reference.lower_bound,
                            "reference": loaded.reference.source}
@@ -273,7 +281,8 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
         done = store.finished_keys(["ok"] if config.retry_failed else None)
         todo = [job for job in jobs if job.spec["key"] not in done]
         outcome.skipped = len(jobs) - len(todo)
-        store.set_meta({"command": shlex.join(sys.argv), "methods": methods, "modes": modes,
+        store.set_meta({"command": shlex.join(sys.argv),
+                        "methods": [method.label for method in methods], "modes": modes,
                         "seeds": config.seeds, "paths": [str(p) for p in config.paths],
                         "last_started": datetime.now(UTC).isoformat(timespec="seconds")})
         if outcome.skipped:

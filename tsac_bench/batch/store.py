@@ -6,6 +6,9 @@ journal rolls back an interrupted transaction. The solution file of a job is wri
 write-then-rename) before its row is committed, so a row never points to a missing file.
 
 One row per job; ``key`` (instance, method, mode, seed) identifies a job across restarts.
+``method`` is the label of the job's method spec (``hocf`` or ``hocf:init=incumbent``,
+``tsac_bench.planning.settings``), so the keys of stores written before specs existed (plain
+names) are the keys of the same jobs now.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from tsac_bench.errors import InputError, TsacBenchError
+from tsac_bench.planning.settings import file_label
 
 DB_NAME = "results.sqlite"
 #: The status of a job that produced a scored solution; anything else is a failure.
@@ -120,9 +124,10 @@ class ResultStore:
 
     def solution_path(self, instance_set: str, instance: str, method: str, mode: str,
                       seed: int) -> Path:
-        """Where a job's solution file goes, relative to the run directory."""
-        safe_method = method.replace("/", "_")
-        return Path(SOLUTIONS_DIR, instance_set, instance, f"{safe_method}-{mode}-s{seed}.json")
+        """Where a job's solution file goes, relative to the run directory (``method``: the
+        spec label)."""
+        return Path(SOLUTIONS_DIR, instance_set, instance,
+                    f"{file_label(method)}-{mode}-s{seed}.json")
 
     # --- reading ---------------------------------------------------------------------------
     def finished_keys(self, statuses: Iterable[str] | None = None) -> set[str]:

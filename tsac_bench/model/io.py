@@ -8,19 +8,21 @@ raised as one ``InputError`` line naming the file and the field, e.g.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
-    StrictFloat,
+    PlainValidator,
     StrictInt,
     StrictStr,
     ValidationError,
 )
+from pydantic_core import PydanticCustomError
 
 from tsac_bench.errors import InputError, ModelError
 from tsac_bench.model import AAV, Depot, Instance, Solution, Task, TaskKind, Visit
@@ -28,7 +30,20 @@ from tsac_bench.model import AAV, Depot, Instance, Solution, Task, TaskKind, Vis
 INSTANCE_FORMAT = "tsac-bench/instance@1"
 SOLUTION_FORMAT = "tsac-bench/solution@1"
 
-Number = StrictInt | StrictFloat
+
+
+def _finite_number(value: Any) -> int | float:
+    # json reads NaN, Infinity and -Infinity; every comparison with NaN is false, so one
+    # would pass every check of the model and be priced.
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise PydanticCustomError("number_type", "Input should be a number")
+    if not math.isfinite(value):
+        raise PydanticCustomError("finite_number", "Input should be a finite number")
+    return value
+
+
+#: A JSON number as written (an integer stays one), finite.
+Number = Annotated[int | float, PlainValidator(_finite_number, json_schema_input_type=float)]
 
 
 class _Schema(BaseModel):

@@ -1,6 +1,7 @@
 """Planning: the ``Allocator`` protocol, the planning state a method sees, the registry of
-methods, and (in their own modules) the priced edits every heuristic shares
-(``insertion``), the dynamic simulator (``simulator``) and one solve (``solve``).
+methods, the constraints of their settings and method specs (``settings``), and (in their own
+modules) the priced edits every heuristic shares (``insertion``), the dynamic simulator
+(``simulator``) and one solve (``solve``).
 
 This package is what a plug-in author imports; it depends only on ``tsac_bench.model``.
 """
@@ -25,6 +26,18 @@ from tsac_bench.planning.registry import (
     make_allocator,
     method_source,
     register,
+    resolve_spec,
+)
+from tsac_bench.planning.settings import (
+    Boolean,
+    Constraint,
+    ExistingFile,
+    Interval,
+    MethodSpec,
+    NoneOr,
+    Options,
+    declare,
+    parse_method_spec,
 )
 
 __all__ = [
@@ -32,17 +45,27 @@ __all__ = [
     "BUILTIN_METHODS",
     "ENTRY_POINT_GROUP",
     "Allocator",
+    "Boolean",
+    "Constraint",
+    "ExistingFile",
+    "Interval",
+    "MethodSpec",
     "MethodUnavailable",
+    "NoneOr",
+    "Options",
     "PlanResult",
     "PlanningState",
     "Settings",
     "allocator_class",
     "available_methods",
+    "declare",
     "exact_methods",
     "is_exact_method",
     "make_allocator",
     "method_source",
+    "parse_method_spec",
     "proves_optimality",
     "register",
+    "resolve_spec",
     "supported_modes",
 ]

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.planning.settings import Constraint
 
 
 @dataclass(frozen=True)
@@ -136,7 +137,12 @@ def proves_optimality(allocator: object) -> bool:
 
 
 class Settings:
-    """Mixin: ``settings()`` returns the constructor keywords, as scikit-learn's get_params."""
+    """Mixin: ``settings()`` returns the constructor keywords, as scikit-learn's get_params.
+
+    ``setting_constraints`` declares what each keyword admits (``tsac_bench.planning.settings``);
+    ``make_allocator`` checks and converts settings by it before the constructor runs."""
+
+    setting_constraints: ClassVar[Mapping[str, Constraint]] = {}
 
     def settings(self) -> dict[str, Any]:
         names = [p for p in inspect.signature(type(self).__init__).parameters if p != "self"]

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import importlib
-import inspect
 from collections.abc import Callable
 from importlib.metadata import entry_points
 from typing import Any
 
 from tsac_bench.errors import TsacBenchError, UnknownMethodError
 from tsac_bench.planning.allocator import Allocator, proves_optimality
+from tsac_bench.planning.settings import MethodSpec, check_settings, parse_method_spec
 
 ENTRY_POINT_GROUP = "tsac_bench.allocators"
 
@@ -82,19 +82,23 @@ def allocator_class(name: str) -> Callable[..., Allocator]:
     raise UnknownMethodError(name, available_methods())
 
 
-def make_allocator(name: str, **settings: Any) -> Allocator:
-    """The method ``name`` built with ``settings`` (its constructor keywords); a name the
-    constructor does not take is a one-line error listing the ones it does."""
-    cls = allocator_class(name)
-    parameters = inspect.signature(cls).parameters.values()
-    accepted = [p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD,
-                                                         p.KEYWORD_ONLY)]
-    takes_any = any(p.kind == p.VAR_KEYWORD for p in parameters)
-    unknown = sorted(set(settings) - set(accepted))
-    if unknown and not takes_any:
-        raise TsacBenchError(f"method {name!r} has no setting {unknown[0]!r}; its settings: "
-                             f"{', '.join(accepted) or 'none'}")
-    return cls(**settings)
+def resolve_spec(spec: str | MethodSpec) -> MethodSpec:
+    """``spec`` (a MethodSpec or its text) with its settings checked and converted by the
+    method's declared constraints: the spec a run records and the allocator is built from."""
+    if isinstance(spec, str):
+        spec = parse_method_spec(spec)
+    return MethodSpec(spec.name, check_settings(spec.name, allocator_class(spec.name),
+                                                spec.settings))
+
+
+def make_allocator(method: str | MethodSpec, **settings: Any) -> Allocator:
+    """The method ``method`` (a name, a spec or a spec's text ``NAME:KEY=VALUE...``) built with
+    its spec's settings and ``settings`` (constructor keywords), checked and converted first
+    (``settings.check_settings``: an unknown, wrong-typed or out-of-range setting is one
+    InvalidSetting line)."""
+    spec = method if isinstance(method, MethodSpec) else parse_method_spec(method)
+    resolved = resolve_spec(spec.with_settings(settings))
+    return allocator_class(resolved.name)(**resolved.settings)
 
 
 def exact_methods() -> list[str]:
@@ -113,6 +117,6 @@ def is_exact_method(label: str) -> bool:
     """Whether the method of a stored label (``NAME`` or ``NAME:KEY=VALUE...``) proves
     optimality; a method not installed here is not taken as exact."""
     try:
-        return proves_optimality(allocator_class(label.partition(":")[0]))
+        return proves_optimality(allocator_class(parse_method_spec(label).name))
     except Exception:  # unknown or unloadable: its results cannot be taken as proven optima
         return False

@@ -13,6 +13,7 @@ from tsac_bench.model import Instance, Solution
 from tsac_bench.model.evaluator import Evaluation, costs_agree
 from tsac_bench.planning.allocator import ALL_MODES, Allocator, PlanningState, supported_modes
 from tsac_bench.planning.registry import make_allocator
+from tsac_bench.planning.settings import MethodSpec
 from tsac_bench.planning.simulator import InvalidPlan, checked_plan, simulate
 
 __all__ = ["InvalidPlan", "SolveOutcome", "solve"]
@@ -43,16 +44,18 @@ class SolveOutcome:
         return costs_agree(self.claimed_cost, self.cost)
 
 
-def solve(instance: Instance, method: str | Allocator, *, seed: int = 0,
+def solve(instance: Instance, method: str | MethodSpec | Allocator, *, seed: int = 0,
           time_limit: float | None = None, mode: str = "static",
           settings: Mapping[str, Any] | None = None) -> SolveOutcome:
-    """Run ``method`` and return its solution scored by the evaluator.
+    """Run ``method`` (a name, a method spec or its text, or an allocator) and return its
+    solution scored by the evaluator; ``settings`` add to the spec's (not for an allocator).
 
     ``time_limit`` is the budget of each plan call. Raises InvalidPlan when the method
     breaks the rules, so that no infeasible plan is ever reported with a cost."""
     if mode not in ALL_MODES:
         raise TsacBenchError(f"unknown mode {mode!r}; known modes: {', '.join(ALL_MODES)}")
-    allocator = make_allocator(method, **(settings or {})) if isinstance(method, str) else method
+    allocator = (make_allocator(method, **(settings or {}))
+                 if isinstance(method, str | MethodSpec) else method)
     if mode not in supported_modes(allocator):
         supported = " and ".join(supported_modes(allocator))
         raise TsacBenchError(f"method {allocator.name!r} plans {supported} states only, "

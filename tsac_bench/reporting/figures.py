@@ -26,6 +26,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from tsac_bench.planning.settings import file_label
 from tsac_bench.reporting.report import (
     OK,
     SolutionLoader,
@@ -174,7 +175,7 @@ def dynamic_gantt(frame: pd.DataFrame, loader: SolutionLoader, out: Path) -> Fig
         instance, solution = loaded
         fig = gantt_figure(instance, solution, replan_curve(row["stats"]),
                            f"{instance.name}: {row['method']} (J = {row['J']:.2f})")
-        paths.append(_save(fig, out / f"gantt-{instance.name}-{row['method']}"))
+        paths.append(_save(fig, out / f"gantt-{instance.name}-{file_label(row['method'])}"))
     note = "" if has_events.any() else ("The runs carry no re-plans (stats['replans']): "
                                         "only the visits are drawn.")
     return title, paths, note

@@ -175,8 +175,8 @@ def test_a_malformed_manifest_is_reported_and_the_run_goes_on(tmp_path, two_inst
     outcome = run_batch(RunConfig([two_instances], tmp_path / "run", methods=["greedy"],
                                   mode="static", jobs=1), note=notes.append, progress=False)
     assert outcome.problems == [f"{two_instances / 'manifest.json'}: "
-                                "instances.quick-2-4-s1.J_star: expected a number or null, "
-                                "got '12'",
+                                "instances.quick-2-4-s1.J_star: expected a finite number or "
+                                "null, got '12'",
                                 f"{two_instances / 'manifest.json'}: "
                                 "instances.quick-2-5-s2.file: missing"]
     assert outcome.ran == 2 and outcome.failed == 0

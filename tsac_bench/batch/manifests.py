@@ -10,6 +10,7 @@ the one-line error that ``verify`` needs.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,7 +63,9 @@ def _number(value: Any) -> float | None:
 
 
 def _is_number_or_null(value: Any) -> bool:
-    return value is None or (isinstance(value, int | float) and not isinstance(value, bool))
+    """JSON null or a finite number (Python's json reads NaN and Infinity as floats)."""
+    return value is None or (isinstance(value, int | float) and not isinstance(value, bool)
+                             and math.isfinite(value))
 
 
 def read_manifest(directory: Path) -> Manifest:
@@ -93,7 +96,7 @@ def read_manifest(directory: Path) -> Manifest:
         wrong = [key for key in ("J_star", "lower_bound") if not _is_number_or_null(entry[key])]
         if wrong:
             manifest.problems.append((f"instances.{name}.{wrong[0]}",
-                                      f"expected a number or null, got {entry[wrong[0]]!r}"))
+                                      f"expected a finite number or null, got {entry[wrong[0]]!r}"))
             continue
         manifest.entries[name] = entry
     return manifest

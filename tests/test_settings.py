@@ -23,6 +23,7 @@ from tsac_bench.planning import (
     resolve_spec,
 )
 from tsac_bench.planning.settings import constructor_keywords, format_value
+from tsac_bench.testing import check_declared_settings
 
 runner = CliRunner()
 
@@ -88,13 +89,7 @@ def one_error_line(result):
 
 @pytest.mark.parametrize("method", sorted(BUILTIN_METHODS))
 def test_every_builtin_declares_every_setting_and_its_defaults_fit(method):
-    cls = builtin_class(method)
-    names, defaults, takes_any = constructor_keywords(cls)
-    assert not takes_any
-    assert sorted(cls.setting_constraints) == sorted(names)
-    for name, constraint in cls.setting_constraints.items():
-        assert constraint.convert(defaults[name]) == defaults[name]
-        assert constraint.admits(defaults[name], defaults), name
+    check_declared_settings(builtin_class(method))
 
 
 @pytest.mark.parametrize("method", sorted(BUILTIN_METHODS))

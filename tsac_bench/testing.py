@@ -32,11 +32,12 @@ from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import AAV_TYPES, generate
 from tsac_bench.model.io import read_solution, write_solution
 from tsac_bench.planning import ALL_MODES, Allocator, MethodUnavailable, supported_modes
-from tsac_bench.planning.registry import allocator_class
+from tsac_bench.planning.registry import allocator_class, make_allocator
+from tsac_bench.planning.settings import constructor_keywords
 from tsac_bench.planning.solve import SolveOutcome, solve
 
 __all__ = ["DEPOTS", "FLEET", "Check", "CheckSkipped", "aav", "allocator_checks",
-           "check_allocator", "edge_cases", "small_instances", "task"]
+           "check_allocator", "check_declared_settings", "edge_cases", "small_instances", "task"]
 
 #: Seconds per plan call: small enough for a suite, large enough for the exact methods.
 TIME_LIMIT = 2.0
@@ -108,13 +109,31 @@ def _method_name(method: str | Allocator) -> str:
     return method if isinstance(method, str) else type(method).name
 
 
-def _declared_modes(method: str | Allocator) -> tuple[str, ...]:
+def _allocator_type(method: str | Allocator) -> type:
     if not isinstance(method, str):
-        return supported_modes(method)
+        return type(method)
     try:
-        return supported_modes(allocator_class(method))
+        return allocator_class(method)
     except MethodUnavailable as exc:
         raise CheckSkipped(str(exc)) from None
+
+
+def check_declared_settings(cls: type) -> None:
+    """A method that declares ``setting_constraints`` declares one per constructor keyword
+    (no catch-all ``**kwargs``), and each default converts to itself and is admitted."""
+    names, defaults, takes_any = constructor_keywords(cls)
+    assert not takes_any, f"{cls.__name__} takes **kwargs: its settings cannot be checked"
+    declared = cls.setting_constraints
+    assert sorted(declared) == sorted(names), (
+        f"declared {sorted(declared)}, constructor keywords {sorted(names)}")
+    for setting, constraint in declared.items():
+        assert constraint.convert(defaults[setting]) == defaults[setting], setting
+        assert constraint.admits(defaults[setting], defaults), (
+            f"the default {setting}={defaults[setting]!r} breaks its own constraint")
+
+
+def _declared_modes(method: str | Allocator) -> tuple[str, ...]:
+    return supported_modes(_allocator_type(method))
 
 
 def _run(method: str | Allocator, instance: Instance, mode: str, *, seed: int = 0,
@@ -161,6 +180,17 @@ def allocator_checks(method: str | Allocator, *,
             raise AssertionError(f"a {unsupported[0]} run of {name} was not refused")
 
     add("undeclared-mode-refused", undeclared_mode_refused)
+
+    def settings_declared_and_rebuilt() -> None:
+        cls = _allocator_type(method)
+        if not getattr(cls, "setting_constraints", None) and constructor_keywords(cls)[0]:
+            raise CheckSkipped(f"{name} declares no setting_constraints")
+        check_declared_settings(cls)
+        built = make_allocator(name) if isinstance(method, str) else method
+        rebuilt = make_allocator(name, **built.settings())
+        assert rebuilt.settings() == built.settings()
+
+    add("settings-declared-and-rebuilt", settings_declared_and_rebuilt)
 
     def feasible_and_scored(instance: Instance, mode: str) -> None:
         outcome = _run(method, instance, mode)

@@ -25,7 +25,8 @@ from pathlib import Path
 import pandas as pd
 
 from tsac_bench.batch.runner import RunConfig, run_batch
-from tsac_bench.reporting.report import load, per_instance, scale_order, write_report
+from tsac_bench.reporting.data import load, per_instance, scale_order
+from tsac_bench.reporting.report import write_report
 
 ROOT = Path(__file__).resolve().parent.parent
 SETS = ROOT / "instances" / "paper-mc"

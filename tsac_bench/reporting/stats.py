@@ -23,9 +23,10 @@ from tsac_bench.reporting.data import per_instance
 
 #: Two costs closer than this (relative) tie for a win.
 TIE_TOLERANCE = 1e-9
-#: Shift of the shifted geometric mean, in units of J: one unit is w3 times the operating
-#: cost of one AAV flying its whole range (MODEL.md, E_base), small against a late (w2 = 10)
-#: or an unserved task (w1 + w2 = 110), so gaps of a fraction of a flight weigh little.
+#: Shift of the shifted geometric mean, in units of J: with the default weights (100, 10, 1)
+#: one unit is the operating cost of one AAV flying its whole range (MODEL.md, E_base), small
+#: against a late (10) or an unserved task (110), so gaps of a fraction of a flight weigh
+#: little.
 SGM_SHIFT = 1.0
 
 

@@ -138,3 +138,15 @@ def test_both_tables_compile_and_fit_a_one_column_article(wide, tmp_path):
     log, pages = pdflatex(tmp_path, latex_table(wide, "static"), "long")
     assert "Overfull \\hbox" not in log
     assert pages >= 2  # 90 rows and 9 group headings: the table breaks across pages
+
+
+def test_a_mode_without_results_gives_empty_tables():
+    failed = pd.DataFrame([{"key": "i|m|static|0", "instance": "i", "scale": "2/4",
+                            "method": "m", "mode": "static", "seed": 0, "status": "error",
+                            "J": np.nan, "J_load": np.nan, "J_time": np.nan, "J_op": np.nan,
+                            "runtime": np.nan, "stats": {}, "J_star": np.nan,
+                            "lower_bound": np.nan}])
+    table = method_table(failed)
+    assert table[["jobs", "failed", "instances", "gap_n"]].values.tolist() == [[1, 1, 0, 0]]
+    spec, rows = tabular_rows(latex_pivot(table, "static"), "tabular")
+    assert (spec, rows) == ("l", [])

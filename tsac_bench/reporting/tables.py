@@ -270,9 +270,10 @@ def pivot_cells(table: pd.DataFrame, mode: str) -> tuple[list[str], list[str],
 
 def _panels(scales: list[str], per_panel: int) -> list[list[str]]:
     """Scales in panels of at most ``per_panel``, as even as possible (9 -> 5 + 4)."""
-    count = max(1, -(-len(scales) // per_panel))
-    size = -(-len(scales) // count)
-    return [scales[i:i + size] for i in range(0, len(scales), size)]
+    count = -(-len(scales) // per_panel)
+    sizes = [len(scales) // count + (i < len(scales) % count) for i in range(count)]
+    starts = [sum(sizes[:i]) for i in range(count)]
+    return [scales[start:start + size] for start, size in zip(starts, sizes, strict=True)]
 
 
 def latex_pivot(table: pd.DataFrame, mode: str, per_panel: int = PIVOT_SCALES) -> str:

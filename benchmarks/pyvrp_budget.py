@@ -20,7 +20,7 @@ from paper_reproduction import instance_files  # a sibling script: benchmarks/ i
 
 from tsac_bench.model.io import read_instance
 from tsac_bench.planning.solve import solve
-from tsac_bench.reporting.report import load
+from tsac_bench.reporting.data import load
 from tsac_bench.solvers.pyvrp_peer import PyVRPAllocator
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -304,7 +304,8 @@ def run(
 
 
 def _print_summary(run_dir: Path) -> None:
-    from tsac_bench.reporting.report import below_reference, load, summary
+    from tsac_bench.reporting.data import below_reference, load
+    from tsac_bench.reporting.tables import summary
 
     frame = load(run_dir)
     if frame.empty:

@@ -1,5 +1,6 @@
 """Figures from a store whose solutions are real files on tests/data/hand.json."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,8 @@ from tsac_bench.batch.store import ResultStore, job_key
 from tsac_bench.model import Solution
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.io import read_instance, read_solution, write_solution
-from tsac_bench.reporting.report import coalition_sizes, write_report
+from tsac_bench.reporting.data import SolutionLoader, coalition_sizes, replan_costs
+from tsac_bench.reporting.report import write_report
 
 pytest.importorskip("matplotlib")
 
@@ -82,7 +84,6 @@ def test_gantt_without_replans_is_drawn_with_a_note(run_dir, tmp_path):
             if row["mode"] == "dynamic":
                 store.record({**row, "stats": {}})
     from tsac_bench.reporting.figures import dynamic_gantt
-    from tsac_bench.reporting.report import SolutionLoader
 
     with ResultStore(run_dir) as store:
         frame = store.frame()
@@ -98,34 +99,62 @@ def _b_cost() -> float:
         instance, {"A0": ["D0", ("T1", 10), "D0"], "A1": ["D0", ("T1", 10), "D0"]}))
 
 
-def test_the_replan_curve_jumps_at_releases_and_drops_with_the_replan():
-    from tsac_bench.reporting.figures import replan_curve
+def released_later(release: float):
+    """hand.json with T3 (window [0, 3600]) released at ``release``, its window opening then."""
+    instance = read_instance(HAND)
+    tasks = tuple(replace(t, release=release, t_start=release) if t.id == "T3" else t
+                  for t in instance.tasks)
+    return replace(instance, tasks=tasks)
 
-    stats = {"replans": [
-        {"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
-        {"time": 90.0, "J": 150.0, "J_known": 40.0, "J_known_before": 130.0}]}
-    assert replan_curve(stats) == ([0.0, 90.0, 90.0], [20.0, 130.0, 40.0],
-                                   "J of the released tasks")
-    plain = {"replans": [{"time": 0.0, "J": 300.0}, {"time": 90.0, "J": 150.0}]}
-    assert replan_curve(plain) == ([0.0, 90.0], [300.0, 150.0], "J after re-plan")
-    assert replan_curve({}) == ([], [], "J after re-plan")
-    assert replan_curve({"replans": [{"J": 1.0}]}) == ([], [], "")
+
+def test_the_cost_curve_is_the_plan_in_force_after_each_replan_never_the_release_spike():
+    from tsac_bench.planning.simulator import simulate
+    from tsac_bench.solvers.greedy import GreedyAllocator
+
+    instance = released_later(250.0)
+    run = simulate(instance, GreedyAllocator())
+    records = [r.to_dict() for r in run.replans]
+    times, costs = replan_costs({"replans": records}, instance)
+    assert times == [0.0, 250.0]
+    assert costs == [run.replans[0].J_known, run.replans[1].J_known]
+    assert costs[1] == pytest.approx(run.evaluation.J, rel=1e-12)  # the executed plan
+    # The cost the simulator records just before the re-plan holds T3 unserved (110): the
+    # curve never shows it.
+    assert run.replans[1].J_known_before == pytest.approx(costs[0] + 110, rel=1e-12)
+    # Early stores kept only J (over every task): T3, unreleased at t = 0, costs w1 + w2.
+    plain = [{"time": r["time"], "J": r["J"]} for r in records]
+    plain_times, plain_costs = replan_costs({"replans": plain}, instance)
+    assert plain_times == times and plain_costs == pytest.approx(costs, rel=1e-12)
+    assert records[0]["J"] - 110 == pytest.approx(costs[0], rel=1e-12)
+
+
+def test_replan_costs_by_hand():
+    instance = released_later(90.0)
+    stats = {"replans": [{"time": 0.0, "J": 300.0}, {"time": 90.0, "J": 150.0}]}
+    assert replan_costs(stats, instance) == ([0.0, 90.0], [190.0, 150.0])
+    known = {"replans": [{"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
+                         {"time": 90.0, "J": 150.0, "J_known": 40.0, "J_known_before": 130.0}]}
+    assert replan_costs(known, instance) == ([0.0, 90.0], [20.0, 40.0])
+    assert replan_costs({}, instance) == ([], [])
+    assert replan_costs({"replans": [{"J": 1.0}]}, instance) == ([], [])
 
 
 def test_gantt_lanes_and_cost_panel():
-    from tsac_bench.reporting.figures import gantt_figure, replan_curve
+    from tsac_bench.reporting.figures import COST_AXIS_LABEL, gantt_figure
 
     instance = read_instance(HAND)
     solution = read_solution(HAND_SOLUTION, instance)
-    stats = {"replans": [{"time": 0.0, "J": 300.0, "J_known": 20.0, "J_known_before": None},
-                         {"time": 90.0, "J": 150.0, "J_known": 40.0, "J_known_before": 130.0}]}
-    fig = gantt_figure(instance, solution, replan_curve(stats), "hand")
+    fig = gantt_figure(instance, solution, ([0.0, 90.0], [20.0, 40.0]), "hand")
     gantt, cost = fig.axes
-    assert cost.get_ylabel() == "J of the released tasks"
+    assert cost.get_ylabel() == COST_AXIS_LABEL
+    assert "plan in force" in COST_AXIS_LABEL and "after each re-plan" in COST_AXIS_LABEL
     # A0 flies 2 legs, A1 5; A1 waits for T1's window (hatched): 8 bars in all.
     assert len(gantt.patches) == 2 + 5 + 1
     labels = sorted(t.get_text() for t in gantt.texts)
     # Four depot visits, but A1 starts at D0: its first leg is a sliver, left unlabelled.
     assert labels == ["D0", "D0", "D0", "T0:5", "T1:10", "T3:10"]
     times, costs = cost.lines[0].get_data()
-    assert list(costs) == [20.0, 130.0, 40.0, 40.0] and list(times)[:3] == [0.0, 90.0, 90.0]
+    # The last plan's cost holds to the end of the last route.
+    end = max(t.arrivals[-1] for t in (CostEvaluator(instance).trace(n, r)
+                                       for n, r in enumerate(solution.routes)) if t.arrivals)
+    assert list(costs) == [20.0, 40.0, 40.0] and list(times) == [0.0, 90.0, end]

@@ -15,7 +15,7 @@ from tsac_bench.batch.worker import execute_job
 from tsac_bench.errors import UnknownMethodError
 from tsac_bench.model.io import read_instance, read_solution
 from tsac_bench.planning.solve import solve
-from tsac_bench.reporting.report import per_instance
+from tsac_bench.reporting.data import per_instance
 
 COMPARED = ["key", "instance", "scale", "method", "mode", "seed", "status", "J", "J_load",
             "J_time", "J_op", "solution_file"]

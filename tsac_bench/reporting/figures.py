@@ -4,12 +4,13 @@
 * Dolan-More performance profiles over the gap to J*;
 * mean coalition size against task demand per method (Fig. 6, coalitions computed by the
   evaluator from the stored solutions);
-* for one dynamic instance, a Gantt chart of every AAV's visits with the cost after each
-  re-plan (Fig. 5) where the run's stats carry the simulator's re-plans (``replans``, each
-  with ``time`` and ``J``, optionally ``J_known`` / ``J_known_before``);
+* for one dynamic instance, a Gantt chart of every AAV's visits with, where the run's stats
+  carry the simulator's re-plans, the J of the plan in force after each re-plan (Fig. 5);
 * route maps of one instance per scale.
 
-Imported only by ``report``: ``import tsac_bench`` never loads matplotlib.
+Every figure is drawn from the frames and objects of ``data`` (and ``stats`` for the
+performance ratios); nothing here reads a store or writes a table. Imported only when a report
+draws figures: ``import tsac_bench`` never loads matplotlib.
 """
 
 from __future__ import annotations
@@ -26,14 +27,17 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from tsac_bench.batch.store import OK
 from tsac_bench.planning.settings import file_label
-from tsac_bench.reporting.report import (
-    OK,
+from tsac_bench.reporting.data import (
     SolutionLoader,
     coalition_sizes,
     ordered_modes,
+    replan_costs,
+    replan_records,
     scale_order,
 )
+from tsac_bench.reporting.stats import performance_ratios
 
 Figure = tuple[str, list[Path], str]  # title, PNG paths, note
 #: Route maps and Gantt charts draw at most this many methods side by side.
@@ -99,20 +103,6 @@ def box_plots(rows: pd.DataFrame) -> Any:
 
 
 # --- performance profiles ----------------------------------------------------------------
-def performance_ratios(rows: pd.DataFrame) -> tuple[pd.DataFrame, str]:
-    """Dolan-More ratios J / J_ref per instance (rows) and method (columns). J_ref is J*
-    where known, else the best J any method reached on the instance; an instance a method did
-    not solve has ratio inf (never within any tau). Also returns what J_ref was."""
-    wide = rows.pivot(index="instance", columns="method", values="J")
-    j_star = rows.groupby("instance")["J_star"].first().reindex(wide.index)
-    known = j_star.where(j_star > 0)
-    reference = known.fillna(wide.min(axis=1))
-    ratios = wide.div(reference, axis=0).fillna(np.inf)
-    basis = "J*" if known.notna().all() else ("J* where known, else the best J found"
-                                              if known.notna().any() else "the best J found")
-    return ratios, basis
-
-
 def _profile(rows: pd.DataFrame, mode: str, out: Path) -> Figure:
     ratios, basis = performance_ratios(rows)
     values = ratios.to_numpy()
@@ -158,12 +148,12 @@ def coalition_figure(data: pd.DataFrame) -> Any:
 
 # --- Fig. 5 ------------------------------------------------------------------------------
 def dynamic_gantt(frame: pd.DataFrame, loader: SolutionLoader, out: Path) -> Figure:
-    title = "Dynamic run: AAV visits and cost after each re-plan (paper Fig. 5)"
+    title = "Dynamic run: AAV visits and the cost of the plan after each re-plan (paper Fig. 5)"
     ok = frame[(frame["status"] == OK) & (frame["mode"] == "dynamic")].sort_values("key")
     if ok.empty:
         return title, [], "No dynamic run in this results store."
-    has_events = ok["stats"].map(lambda s: bool(replan_curve(s)[0]))
-    chosen = ok[has_events] if has_events.any() else ok
+    has_replans = ok["stats"].map(lambda s: bool(replan_records(s)))
+    chosen = ok[has_replans] if has_replans.any() else ok
     instance_name = chosen.iloc[0]["instance"]
     rows = chosen[(chosen["instance"] == instance_name)]
     rows = rows[rows["seed"] == rows["seed"].min()].head(MAX_PANELS)
@@ -173,44 +163,27 @@ def dynamic_gantt(frame: pd.DataFrame, loader: SolutionLoader, out: Path) -> Fig
         if loaded is None:
             continue
         instance, solution = loaded
-        fig = gantt_figure(instance, solution, replan_curve(row["stats"]),
+        fig = gantt_figure(instance, solution, replan_costs(row["stats"], instance),
                            f"{instance.name}: {row['method']} (J = {row['J']:.2f})")
         paths.append(_save(fig, out / f"gantt-{instance.name}-{file_label(row['method'])}"))
-    note = "" if has_events.any() else ("The runs carry no re-plans (stats['replans']): "
-                                        "only the visits are drawn.")
+    note = ("Lower panel: J of the plan in force after each re-plan, over the tasks released "
+            "by then (a task released later is not in it).") if has_replans.any() else (
+            "The runs carry no re-plans (stats['replans']): only the visits are drawn.")
     return title, paths, note
 
 
-def replan_curve(stats: Any) -> tuple[list[float], list[float], str]:
-    """The cost curve of a dynamic run from its stats: times, costs and what the cost is.
-
-    With ``J_known`` (the cost over the tasks known so far) the curve jumps up when tasks are
-    released (``J_known_before``: the new tasks still unserved) and drops with the re-plan, as
-    in the paper's Fig. 5; otherwise it is J over all tasks after each re-plan."""
-    replans = (stats.get("replans") or stats.get("events") or []) if isinstance(stats,
-                                                                              dict) else []
-    times: list[float] = []
-    costs: list[float] = []
-    known = bool(replans) and all(isinstance(r, dict) and r.get("J_known") is not None
-                                  for r in replans)
-    for r in replans:
-        if not isinstance(r, dict) or r.get("time") is None or r.get("J") is None:
-            return [], [], ""
-        if known and r.get("J_known_before") is not None:
-            times.append(float(r["time"]))
-            costs.append(float(r["J_known_before"]))
-        times.append(float(r["time"]))
-        costs.append(float(r["J_known"] if known else r["J"]))
-    return times, costs, "J of the released tasks" if known else "J after re-plan"
+#: The cost panel's axis label: what its curve is.
+COST_AXIS_LABEL = "J of the plan in force\nafter each re-plan\n(released tasks)"
 
 
-def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[float], str],
+def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[float]],
                  title: str) -> Any:
     """Top: one lane per AAV, a bar per leg (flight solid, waiting for the window hatched),
-    labelled with the node it reaches. Bottom (when the run has re-plans): its cost curve."""
+    labelled with the node it reaches. Bottom (when the run has re-plans): the J of the plan
+    in force after each re-plan (``data.replan_costs``), held until the next."""
     from tsac_bench.model.evaluator import CostEvaluator
 
-    times, costs, cost_label = curve
+    times, costs = curve
     evaluator = CostEvaluator(instance)
     traces = [evaluator.trace(n, route) for n, route in enumerate(solution.routes)]
     end = max((t.arrivals[-1] for t in traces if t.arrivals), default=1.0)
@@ -247,7 +220,7 @@ def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[fl
         costs = [*costs, costs[-1]]
         cost_ax = axes[1][0]
         cost_ax.step(times, costs, where="post", marker="o")
-        cost_ax.set_ylabel(cost_label)
+        cost_ax.set_ylabel(COST_AXIS_LABEL, fontsize=8)
         cost_ax.grid(alpha=0.3)
     axes[-1][0].set_xlabel("time (s); dashed: task releases")
     fig.tight_layout()

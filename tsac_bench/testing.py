@@ -33,7 +33,7 @@ from tsac_bench.model.generator import AAV_TYPES, generate
 from tsac_bench.model.io import read_solution, write_solution
 from tsac_bench.planning import ALL_MODES, Allocator, MethodUnavailable, supported_modes
 from tsac_bench.planning.registry import allocator_class, make_allocator
-from tsac_bench.planning.settings import constructor_keywords
+from tsac_bench.planning.settings import check_settings, constructor_keywords
 from tsac_bench.planning.solve import SolveOutcome, solve
 
 __all__ = ["DEPOTS", "FLEET", "Check", "CheckSkipped", "aav", "allocator_checks",
@@ -187,7 +187,7 @@ def allocator_checks(method: str | Allocator, *,
             raise CheckSkipped(f"{name} declares no setting_constraints")
         check_declared_settings(cls)
         built = make_allocator(name) if isinstance(method, str) else method
-        rebuilt = make_allocator(name, **built.settings())
+        rebuilt = cls(**check_settings(name, cls, built.settings()))
         assert rebuilt.settings() == built.settings()
 
     add("settings-declared-and-rebuilt", settings_declared_and_rebuilt)

@@ -27,11 +27,8 @@ import numpy as np
 import pandas as pd
 
 from tsac_bench.batch.store import OK, ResultStore
-from tsac_bench.planning import is_exact_method
-
-MODE_ORDER = ("static", "dynamic")
-#: Relative slack below J* or the lower bound that is put down to solver tolerances.
-REFERENCE_TOLERANCE = 1e-6
+from tsac_bench.model.evaluator import cost_at_least
+from tsac_bench.planning import ALL_MODES, is_exact_method
 
 
 def load(run_dir: str | Path) -> pd.DataFrame:
@@ -57,8 +54,8 @@ def scale_order(scales: Sequence[str]) -> list[str]:
 
 
 def ordered_modes(modes: Sequence[str]) -> list[str]:
-    known = [m for m in MODE_ORDER if m in set(modes)]
-    return known + sorted(set(modes) - set(MODE_ORDER))
+    known = [m for m in ALL_MODES if m in set(modes)]
+    return known + sorted(set(modes) - set(ALL_MODES))
 
 
 def references(frame: pd.DataFrame) -> pd.DataFrame:
@@ -113,7 +110,9 @@ def below_reference(frame: pd.DataFrame) -> pd.DataFrame:
     ok = frame[frame["status"] == OK].drop(columns=["J_star", "lower_bound"])
     ok = ok.merge(references(frame), left_on="instance", right_index=True, how="left")
     floor = ok[["J_star", "lower_bound"]].max(axis=1)
-    below = ok["J"] < floor * (1 - REFERENCE_TOLERANCE) - 1e-9
+    at_least = [cost_at_least(j, f) if pd.notna(f) else True for j, f in zip(ok["J"], floor,
+                                                                             strict=True)]
+    below = ~pd.Series(at_least, index=ok.index, dtype=bool)
     return ok.loc[below, ["key", "J", "J_star", "lower_bound", "J_star_source"]]
 
 

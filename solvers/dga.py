@@ -40,7 +40,7 @@ import numpy as np
 
 from tsac_bench.allocator import PlanningState, PlanResult, Settings
 from tsac_bench.errors import InvalidSetting
-from tsac_bench.evaluator import CostEvaluator, PlanState
+from tsac_bench.evaluator import PlanState
 from tsac_bench.insertion import best_insertion, removal_route
 from tsac_bench.model import Route, Visit
 
@@ -64,7 +64,7 @@ class Problem:
                  crossover_rate: float, mutation_rate: float) -> None:
         self.state = state
         self.instance = instance = state.instance
-        self.evaluator = CostEvaluator(instance)
+        self.evaluator = state.evaluator()
         self.first_free = tuple(state.first_free(n) for n in range(instance.n_aavs))
         self.visible = tuple(sorted(state.visible))
         self.candidates = candidates
@@ -173,8 +173,7 @@ class Problem:
         if visits:
             n, i = visits[int(rng.integers(len(visits)))]
             route = plan.traces[n].route
-            node, amount = route[i]
-            shrunk = Visit(node, int(rng.integers(1, amount)))
+            shrunk = Visit(route[i].node, int(rng.integers(1, route[i].amount)))
             proposal = plan.propose(n, (*route[:i], shrunk, *route[i + 1:]))
             if proposal is not None:
                 plan.apply(proposal)

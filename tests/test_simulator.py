@@ -275,3 +275,31 @@ def test_replan_seeds_are_derived_and_fit_a_signed_32_bit_int():
     simulate(generate("4/10", 5), SeedRecorder(), seed=7)
     assert seeds[0] == 7 and len(seeds) == 3  # t = 0 and the generator's two events
     assert len(set(seeds)) == 3 and all(0 <= s < 2**31 for s in seeds)
+
+
+class Cheat:
+    """Plans like greedy at t = 0; at the re-plan returns ``routes(state)`` as they are."""
+
+    name = "cheat"
+
+    def __init__(self, routes):
+        self.routes = routes
+
+    def plan(self, state, *, seed=0, time_limit=None):
+        if state.time == 0:
+            return GreedyAllocator().plan(state)
+        return PlanResult(self.routes(state))
+
+
+def test_delivering_goods_never_loaded_is_an_error_of_the_method():
+    # At 50 A0 left D0 with T0's 5 kg; flying on from T0 to T1 needs 5 kg more.
+    flown_on = Cheat(lambda state: ((*state.committed[0], Visit(T1, 5), Visit(D0)),))
+    with pytest.raises(InvalidPlan, match="load-exceeded"):
+        simulate(deliveries(50), flown_on)
+
+
+def test_writing_a_load_is_the_simulators_job():
+    extra = Cheat(lambda state: ((*state.committed[0], Visit(D0, load=5), Visit(T1, 5),
+                                  Visit(D0)),))
+    with pytest.raises(InvalidPlan, match="carries a load"):
+        simulate(deliveries(50), extra)

@@ -8,7 +8,10 @@ seed 0, on the first ``--per-scale`` instances (by seed) of each scale of
 ``instances/paper-mc/`` into ``--out``, with the reproduction's machinery (the runner, its
 default time limits). Which code runs is whichever ``tsac_bench`` Python imports: the
 "before" store was made from a copy of the code before the change put first on PYTHONPATH.
-``write`` puts the two stores' mean J side by side, with the ranking by mean J of each.
+``write`` puts the two stores' mean J side by side, with the ranking by mean J of each, and
+counts in each store's executed routes (timed by Eq. 7 with their stamps, if any) the visits
+that left toward a task before its release and the deliveries whose depot was left before
+their release (the issue's independent check).
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ import pandas as pd
 from paper_reproduction import OUR_METHODS, PAPER_METHODS, SCALES, instance_files
 
 import tsac_bench
+from tsac_bench.evaluator import CostEvaluator
+from tsac_bench.io import read_instance, read_solution
 from tsac_bench.report import load, per_instance
 from tsac_bench.runner import RunConfig, run_batch
 
@@ -40,6 +45,31 @@ def means(store: Path) -> pd.DataFrame:
     table = per_instance(load(store).query("status == 'ok'"))
     table = table[table["mode"] == "dynamic"]
     return table.pivot_table(index="method", columns="scale", values="J", aggfunc="mean")
+
+
+def early_departures(store: Path) -> pd.DataFrame:
+    """Per method: task visits left toward before the task's release, and deliveries whose
+    loading depot was left before the delivery's release, summed over the store's runs."""
+    frame = load(store).query("status == 'ok' and mode == 'dynamic'")
+    rows = []
+    for row in frame.itertuples():
+        instance = read_instance(row.instance_file)
+        routes = read_solution(store / row.solution_file, instance).routes
+        evaluator = CostEvaluator(instance)
+        early = stale = 0
+        for n, route in enumerate(routes):
+            trace = evaluator.trace(n, route)
+            left_depot = None  # when the AAV left the depot that loaded the current trip
+            for k, v in enumerate(route):
+                if instance.is_depot(v.node):
+                    left_depot = trace.departures[k + 1] if k + 1 < len(route) else None
+                    continue
+                release = instance.tasks[v.node].release
+                early += trace.departures[k] < release
+                stale += (instance.tasks[v.node].is_delivery and left_depot is not None
+                          and left_depot < release)
+        rows.append({"method": row.method, "early": early, "stale": stale})
+    return pd.DataFrame(rows).groupby("method").sum()
 
 
 def write(args: argparse.Namespace) -> None:
@@ -65,6 +95,14 @@ def write(args: argparse.Namespace) -> None:
     lines.append("")
     lines.append("Instances per scale: " + ", ".join(f"{counts.get(s, 0)} at {s}"
                                                      for s in scales) + ".")
+    checks = early_departures(args.before).join(early_departures(args.after),
+                                                lsuffix="_before", rsuffix="_after")
+    lines += ["", "| method | visits left toward a task before its release (before / after) "
+              "| deliveries whose depot was left before their release (before / after) |",
+              "|---|---:|---:|"]
+    for method, r in checks.iterrows():
+        lines.append(f"| {method} | {r.early_before} / {r.early_after} | "
+                     f"{r.stale_before} / {r.stale_after} |")
     print("\n".join(lines))
 
 

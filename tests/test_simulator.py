@@ -298,8 +298,12 @@ def test_delivering_goods_never_loaded_is_an_error_of_the_method():
         simulate(deliveries(50), flown_on)
 
 
-def test_writing_a_load_is_the_simulators_job():
+def test_writing_a_stamp_is_the_simulators_job():
     extra = Cheat(lambda state: ((*state.committed[0], Visit(D0, load=5), Visit(T1, 5),
                                   Visit(D0)),))
-    with pytest.raises(InvalidPlan, match="carries a load"):
+    with pytest.raises(InvalidPlan, match="carries a stamp"):
         simulate(deliveries(50), extra)
+    early = Cheat(lambda state: ((*state.committed[0], Visit(D0, planned_at=0.0),
+                                  Visit(T1, 5), Visit(D0)),))
+    with pytest.raises(InvalidPlan, match="carries a stamp"):
+        simulate(deliveries(50), early)

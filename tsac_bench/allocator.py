@@ -134,8 +134,8 @@ class PlanningState:
         return tuple(warm)
 
     def violations(self, routes: Sequence[Route]) -> list[str]:
-        """What in ``routes`` this state forbids (changed prefix, invisible task, a load
-        written on a visit the AAV has not left: only the simulator records loads)."""
+        """What in ``routes`` this state forbids (changed prefix, invisible task, a stamp on
+        a visit after the prefix: only the simulator writes ``planned_at`` and ``load``)."""
         problems = []
         if len(routes) != self.instance.n_aavs:
             return [f"{len(routes)} routes for {self.instance.n_aavs} AAVs"]
@@ -145,9 +145,9 @@ class PlanningState:
             if tuple(route[: len(prefix)]) != prefix:
                 problems.append(f"{aav}: the committed prefix was changed")
             for v in route[len(prefix):]:
-                if v.load is not None:
-                    problems.append(f"{aav}: a planned visit carries a load (the simulator "
-                                    "records it when the AAV leaves the depot)")
+                if v.load is not None or v.planned_at is not None:
+                    problems.append(f"{aav}: a planned visit carries a stamp (planned_at, "
+                                    "load): the simulator writes them")
                 if v.node < n_tasks and v.node not in self.visible:
                     problems.append(f"{aav}: visits task {self.instance.tasks[v.node].id} "
                                     f"which is not visible at t={self.time:g}")

@@ -19,8 +19,8 @@ Rules (docs/model.md, "The dynamic run"):
   closed (t_end < t_e): a visit made after t_e cannot lower its cost (C_load is already 0
   or the visit is late; it only adds C_op or makes C_time 1).
 * Every plan is checked: it must keep every prefix (stamps included), visit only visible
-  tasks, write no load itself and be feasible with its stamps (no delivery beyond a recorded
-  load). A plan that breaks a rule stops the run with ``InvalidPlan``.
+  tasks, write no stamp itself and be feasible with its stamps (no delivery beyond a
+  recorded load). A plan that breaks a rule stops the run with ``InvalidPlan``.
 * The executed routes are the last plan's routes (nothing changes after the last event);
   they are evaluated from scratch. Tasks never served cost w1 + w2 like any other.
 
@@ -181,7 +181,10 @@ def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
             traces = plan.evaluation.traces
             prefixes = committed_prefixes(instance, traces, t)
             visible = instance.released_by(t) - finished_tasks(instance, traces, prefixes, t)
-            incumbent = tuple((*prefix, *route[len(prefix):])
+            # The plan in force as a warm start: the visits after the prefixes are to be
+            # planned again, so they carry no stamp yet.
+            incumbent = tuple((*prefix, *(v._replace(planned_at=None)
+                                          for v in route[len(prefix):]))
                               for prefix, route in zip(prefixes, plan.routes, strict=True))
             state = PlanningState(instance, t, visible, prefixes, incumbent)
         before = None if plan is None else known_cost(plan.evaluation, t)

@@ -307,3 +307,14 @@ def test_writing_a_stamp_is_the_simulators_job():
                                   Visit(T1, 5), Visit(D0)),))
     with pytest.raises(InvalidPlan, match="carries a stamp"):
         simulate(deliveries(50), early)
+
+
+@pytest.mark.parametrize(("instance", "J"), [
+    (line(250), 2 * (10 * 100 / 3600 + 20 * 1.0 / 3200)),
+    (deliveries(50), 10 * 100 / 3600 + 20 * 1.0 / 3200 + 10 * 350 / 3600 + 2 * 20 / 3200),
+], ids=["idle-aav", "unloaded-goods"])
+def test_the_exact_milp_plans_the_physical_optimum_of_the_hand_cases(instance, J):
+    outcome = solve(instance, "exact", mode="dynamic")
+    assert outcome.stats["replans"][-1]["stats"]["status"] == "optimal"
+    assert outcome.cost == pytest.approx(J, rel=1e-9)
+    assert outcome.claim_matches

@@ -95,8 +95,9 @@ def write(args: argparse.Namespace) -> None:
     lines.append("")
     lines.append("Instances per scale: " + ", ".join(f"{counts.get(s, 0)} at {s}"
                                                      for s in scales) + ".")
-    checks = early_departures(args.before).join(early_departures(args.after),
-                                                lsuffix="_before", rsuffix="_after")
+    checks = early_departures(args.before).merge(
+        early_departures(args.after), left_index=True, right_index=True,
+        suffixes=("_before", "_after"))
     lines += ["", "| method | visits left toward a task before its release (before / after) "
               "| deliveries whose depot was left before their release (before / after) |",
               "|---|---:|---:|"]

@@ -59,20 +59,26 @@ class MilpData:
     prefixes: list[Prefix]
     late: set[tuple[int, int]]
     constant: float  # cost of tasks outside the model (not visible): w1 + w2 each
+    committed: tuple[Route, ...] = ()  # the prefixes, stamps included
+    plan_time: float = 0.0  # when the free visits are planned (a dynamic re-plan's t_e)
     range_aavs: set[int] = field(default_factory=set)  # AAVs whose Dcum the model tracks
     over_range: dict[tuple[int, int], int | None] = field(default_factory=dict)  # fixed o
 
 
 def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
                committed: Sequence[Route] | None = None,
-               options: MilpOptions | None = None) -> Any:
+               options: MilpOptions | None = None, plan_time: float = 0.0) -> Any:
     """The MILP over ``tasks`` (default all; others stay unserved) with every AAV's route
-    starting with its ``committed`` prefix. Returns the model; ``model.data`` is a MilpData."""
+    starting with its ``committed`` prefix and its free visits planned at ``plan_time`` (it
+    leaves its anchor no earlier). Returns the model; ``model.data`` is a MilpData."""
     import pyomo.environ as pyo
+
+    from tsac_bench.planning import PlanningState
 
     options = options or MilpOptions()
     n_aavs = instance.n_aavs
     committed = tuple(committed) if committed else tuple(() for _ in range(n_aavs))
+    moment = PlanningState(instance, plan_time, frozenset(), committed)
     prefixes = [parse_prefix(instance, p) for p in committed]
     in_prefix = {m for p in prefixes for _, m, _, _ in p.steps}
     chosen = sorted(set(range(instance.n_tasks) if tasks is None else tasks) | in_prefix)
@@ -86,12 +92,14 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
         # Every AAV may join any chosen task, also one another AAV's prefix has committed to:
         # a partly served task's coalition can still grow.
         networks.append(aav_network(instance, n, chosen, prefix_arrivals(
-            instance, n, committed[n]), required, trailing))
+            instance, n, committed[n]), required, trailing, prefix.last,
+            moment.anchor(n).time))
     w1, w2, w3 = instance.weights
     horizon = instance.horizon
     e_base = instance.e_base
     data = MilpData(instance, chosen, networks, prefixes, late,
-                    constant=instance.unserved_task_cost * (instance.n_tasks - len(chosen)))
+                    constant=instance.unserved_task_cost * (instance.n_tasks - len(chosen)),
+                    committed=committed, plan_time=plan_time)
 
     model = pyo.ConcreteModel(name=f"tsac-milp[{instance.name}]")
     model.data = data
@@ -181,6 +189,17 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
 
     model.P = pyo.Set(initialize=list(pairs), dimen=3, ordered=True)
     model.time = pyo.Constraint(model.P, rule=time_rule)
+
+    # A free arc out of the anchor leaves it no earlier than the plan (MODEL.md, "Time").
+    def ready_rule(m: Any, n: int, i: int, j: int) -> Any:
+        net = networks[n]
+        if i != net.anchor or (net.ready <= 0 and net.committed_depot is None):
+            return pyo.Constraint.Skip
+        speed = instance.aavs[n].speed
+        return m.t[n, j] >= sum(net.ready_arrival(arc_of[k], speed) * m.x[k]
+                                for k in pairs[n, i, j])
+
+    model.ready = pyo.Constraint(model.P, rule=ready_rule)
     # Arcs of zero travel time (coincident points) need an order to exclude cycles.
     zero = [p for p in pairs if p[1] != START and min(arc_of[k].travel for k in pairs[p]) == 0]
     if zero:
@@ -218,6 +237,10 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
         return m.pl[n, j] >= before + picked(m, n, j) - cap(n) * (1 - m.x[n, i, j, mode])
 
     model.delivery_chain = pyo.Constraint(direct, rule=delivery_chain)
+    # A committed depot visit the AAV has left loaded what it recorded, no more.
+    model.recorded_load = pyo.Constraint(
+        [(n, j) for n, p in enumerate(prefixes) for j in p.loads],
+        rule=lambda m, n, j: m.dl[n, j] + delivered(m, n, j) <= prefixes[n].loads[j])
     model.pickup_chain = pyo.Constraint([k for k in direct if k[1] != START],
                                         rule=pickup_chain)
 
@@ -367,7 +390,10 @@ def _add_time_flow(model: Any, data: MilpData, arc_of: dict, arcs_in: dict,
         n, i, j, _ = key
         net = networks[n]
         leave = 0.0 if i == START else net.earliest[i]
-        return max(net.earliest[j], leave + arc_of[key].travel)
+        low = max(net.earliest[j], leave + arc_of[key].travel)
+        if i == net.anchor:
+            low = max(low, net.ready_arrival(arc_of[key], instance.aavs[n].speed))
+        return low
 
     model.r = pyo.Var(model.A, domain=pyo.NonNegativeReals)
     model.r_low = pyo.Constraint(model.A, rule=lambda m, *k: m.r[k] >= lowest(k) * m.x[k])
@@ -423,7 +449,10 @@ def decode(model: Any) -> tuple[Route, ...]:
             route.append(Visit(trailing))
         elif route:
             route.append(Visit(instance.nearest_depot(node)))
-        routes.append(tuple(route))
+        # The arcs give the prefix's nodes and amounts; the prefix itself has its stamps.
+        prefix = data.committed[n] if data.committed else ()
+        assert [v[:2] for v in route[:len(prefix)]] == [v[:2] for v in prefix]
+        routes.append((*prefix, *route[len(prefix):]))
     return tuple(routes)
 
 
@@ -433,7 +462,8 @@ def warm_start(model: Any, routes: Sequence[Route]) -> None:
     Raises KeyError if a route uses an arc the model does not have."""
     data: MilpData = model.data
     instance = data.instance
-    evaluator = CostEvaluator(instance)
+    evaluator = CostEvaluator(instance, data.plan_time, [len(p) for p in data.committed]
+                              if data.committed else None)
     for var in model.component_data_objects(ctype=_var_type()):
         if not var.fixed:
             var.set_value(max(0.0, var.lb if var.lb is not None else 0.0))
@@ -619,12 +649,12 @@ def canonical_warm_start(model: Any, routes: Sequence[Route],
     data: MilpData = model.data
     instance = data.instance
     free = [len(p) for p in committed] if committed else None
-    routes = canonical_routes(instance, routes, free)
+    routes = canonical_routes(instance, routes, free, data.plan_time)
     allowed = set(data.tasks)
     # A plan that visits tasks outside the model cannot be a start: drop those visits.
     routes = tuple(tuple(v for v in r if instance.is_depot(v.node) or v.node in allowed)
                    for r in routes)
-    routes = canonical_routes(instance, routes, free)
+    routes = canonical_routes(instance, routes, free, data.plan_time)
     routes = order_identical(instance, routes, committed)
     warm_start(model, routes)
     return routes

@@ -40,12 +40,14 @@ DIRECT = -1
 
 
 def canonical_routes(instance: Instance, routes: Sequence[Route],
-                     first_free: Sequence[int] | None = None) -> tuple[Route, ...]:
+                     first_free: Sequence[int] | None = None,
+                     plan_time: float = 0.0) -> tuple[Route, ...]:
     """``routes`` (feasible) in canonical form, J not raised; visits before ``first_free[n]``
-    (a committed prefix) are left as they are."""
-    evaluator = CostEvaluator(instance)
-    routes = [tuple(r) for r in routes]
+    (a committed prefix) are left as they are, the others are timed as planned at
+    ``plan_time``."""
     free = list(first_free) if first_free is not None else [0] * len(routes)
+    evaluator = CostEvaluator(instance, plan_time, free)
+    routes = [tuple(r) for r in routes]
     is_depot = instance.is_depot
     # Late visits first: they carry no on-time goods, so nothing else depends on them.
     for n, route in enumerate(routes):
@@ -68,7 +70,7 @@ def canonical_routes(instance: Instance, routes: Sequence[Route],
             cut = min(excess, amount)
             excess -= cut
             route = list(routes[n])
-            route[k] = Visit(m, amount - cut)
+            route[k] = route[k]._replace(amount=amount - cut)
             routes[n] = tuple(route)
     for n, route in enumerate(routes):
         head = list(route[:free[n]])
@@ -114,7 +116,11 @@ class Arc:
 
 @dataclass
 class AavNetwork:
-    """The task visits and arcs one AAV may use in a canonical solution."""
+    """The task visits and arcs one AAV may use in a canonical solution.
+
+    ``anchor`` is the tail of the arcs a plan may choose first (the last committed task, or
+    START); the AAV leaves the node it last committed to (that task, its start position or a
+    committed depot visit after them) no earlier than ``ready``."""
 
     n: int
     tasks: list[int]
@@ -122,6 +128,15 @@ class AavNetwork:
     latest: dict[int, float]  # t_end (late visits are excluded)
     min_distance: dict[int, float]  # least Dcum on arrival
     arcs: list[Arc] = field(default_factory=list)
+    anchor: int = START
+    ready: float = 0.0
+    committed_depot: int | None = None
+
+    def ready_arrival(self, arc: Arc, speed: float) -> float:
+        """The earliest arrival at the head of a free arc out of the anchor: from ``ready``
+        at the committed depot (only its leg into the head is left) or at the anchor."""
+        return self.ready + (arc.leg if self.committed_depot is not None else arc.distance) \
+            / speed
 
     def arcs_into(self, j: int) -> list[Arc]:
         return [a for a in self.arcs if a.head == j]
@@ -133,12 +148,14 @@ class AavNetwork:
 def aav_network(instance: Instance, n: int, tasks: Sequence[int],
                 fixed_arrival: dict[int, float] | None = None,
                 required: Sequence[tuple[int, int, int]] = (),
-                committed_depot: tuple[int, int] | None = None) -> AavNetwork:
+                committed_depot: tuple[int, int] | None = None,
+                anchor: int = START, ready: float = 0.0) -> AavNetwork:
     """AAV n's network over ``tasks``. ``fixed_arrival`` gives the known arrival of committed
     visits (kept even when late); ``required`` lists (tail, head, mode) arcs that must exist
     (a committed prefix); ``committed_depot`` = (tail, depot) when the prefix ends with a depot
     visit after ``tail``: every way on from ``tail`` then goes through that depot, dominated
-    or not, since it has been flown already."""
+    or not, since it has been flown already. ``anchor`` and ``ready``: the tail of the free
+    arcs and when the AAV can leave for them (see AavNetwork)."""
     fixed_arrival = fixed_arrival or {}
     aav = instance.aavs[n]
     dist = instance.dist_rows
@@ -176,7 +193,8 @@ def aav_network(instance: Instance, n: int, tasks: Sequence[int],
                 continue
         earliest[j], latest[j], min_distance[j] = early, late, shortest
         kept.append(j)
-    network = AavNetwork(n, kept, earliest, latest, min_distance)
+    network = AavNetwork(n, kept, earliest, latest, min_distance, anchor=anchor, ready=ready,
+                         committed_depot=None if committed_depot is None else committed_depot[1])
     must = set(required)
     for i in [START, *kept]:
         leave = 0.0 if i == START else earliest[i]
@@ -185,7 +203,11 @@ def aav_network(instance: Instance, n: int, tasks: Sequence[int],
                 continue
             for mode, distance, leg in modes(i, j):
                 travel = distance / v
-                if leave + travel <= latest[j] + TIME_TOLERANCE or (i, j, mode) in must:
+                arrival = leave + travel
+                if i == anchor:
+                    arrival = max(arrival, network.ready_arrival(
+                        Arc(i, j, mode, distance, leg, travel), v))
+                if arrival <= latest[j] + TIME_TOLERANCE or (i, j, mode) in must:
                     network.arcs.append(Arc(i, j, mode, distance, leg, travel))
     present = {(a.tail, a.head, a.mode) for a in network.arcs}
     for i, j, mode in must - present:
@@ -219,6 +241,8 @@ class Prefix:
 
     steps: tuple[tuple[int, int, int, int], ...]
     trailing_depot: int | None
+    #: The delivery goods recorded on the committed depot visit before a task (by task).
+    loads: dict[int, int] = field(default_factory=dict)
 
     @property
     def last(self) -> int:
@@ -230,16 +254,18 @@ class UnsupportedPrefix(ValueError):
 
 
 def parse_prefix(instance: Instance, prefix: Route) -> Prefix:
-    steps, pending, tail = [], None, START
+    steps, pending, tail, loads = [], None, START, {}
     for v in prefix:
         if instance.is_depot(v.node):
             if pending is not None:
                 raise UnsupportedPrefix("a committed prefix with two depot visits in a row")
-            pending = v.node
+            pending = v
         else:
-            steps.append((tail, v.node, DIRECT if pending is None else pending, v.amount))
+            steps.append((tail, v.node, DIRECT if pending is None else pending.node, v.amount))
+            if pending is not None and pending.load is not None:
+                loads[v.node] = pending.load
             tail, pending = v.node, None
-    return Prefix(tuple(steps), pending)
+    return Prefix(tuple(steps), None if pending is None else pending.node, loads)
 
 
 def prefix_arrivals(instance: Instance, n: int, prefix: Route) -> dict[int, float]:

@@ -29,7 +29,6 @@ from tsac_bench.model import Route
 from tsac_bench.model.evaluator import (
     TIME_TOLERANCE,
     Contribution,
-    CostEvaluator,
     PlanState,
     Proposal,
     RouteTrace,
@@ -106,7 +105,7 @@ class ContractNetManager:
     def __init__(self, state: PlanningState, commitment: str = "arrival") -> None:
         self.state = state
         instance = state.instance
-        self.plan = CostEvaluator(instance).state(state.warm_routes())
+        self.plan = state.evaluator().state(state.warm_routes())
         self.contractors = [Contractor(self.plan, n, state.first_free(n), commitment)
                             for n in range(instance.n_aavs)]
         self.awards: list[Award] = []

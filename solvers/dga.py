@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from tsac_bench.model import Route, Visit
-from tsac_bench.model.evaluator import CostEvaluator, PlanState
+from tsac_bench.model.evaluator import PlanState
 from tsac_bench.planning import Interval, PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import best_insertion, removal_route
 
@@ -63,7 +63,7 @@ class Problem:
                  crossover_rate: float, mutation_rate: float) -> None:
         self.state = state
         self.instance = instance = state.instance
-        self.evaluator = CostEvaluator(instance)
+        self.evaluator = state.evaluator()
         self.first_free = tuple(state.first_free(n) for n in range(instance.n_aavs))
         self.visible = tuple(sorted(state.visible))
         self.candidates = candidates
@@ -172,8 +172,7 @@ class Problem:
         if visits:
             n, i = visits[int(rng.integers(len(visits)))]
             route = plan.traces[n].route
-            node, amount = route[i]
-            shrunk = Visit(node, int(rng.integers(1, amount)))
+            shrunk = Visit(route[i].node, int(rng.integers(1, route[i].amount)))
             proposal = plan.propose(n, (*route[:i], shrunk, *route[i + 1:]))
             if proposal is not None:
                 plan.apply(proposal)

@@ -84,13 +84,13 @@ class ExactAllocator(Settings):
         began = time.perf_counter()
         limit = _limit(self.time_limit, time_limit)
         instance = state.instance
-        evaluator = CostEvaluator(instance)
+        evaluator = state.evaluator()
         start = _greedy(state)
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start)}
         try:
             # Every MilpOptions field is a setting of this method under the same name.
             options = MilpOptions(**{f.name: getattr(self, f.name) for f in fields(MilpOptions)})
-            model = build_milp(instance, state.visible, state.committed, options)
+            model = build_milp(instance, state.visible, state.committed, options, state.time)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)
@@ -134,9 +134,10 @@ class CpSatAllocator(Settings):
         from tsac_bench.formulations.cpsat import solve_cpsat_isolated
         from tsac_bench.formulations.network import canonical_routes
 
-        if any(state.committed):
+        if any(state.committed) or state.time > 0:
             raise TsacBenchError("exact-cpsat solves static planning states only (no "
-                                 "committed visits); use 'exact' in a dynamic run")
+                                 "committed visits, nothing planned after t = 0); use "
+                                 "'exact' in a dynamic run")
         began = time.perf_counter()
         instance = state.instance
         evaluator = CostEvaluator(instance)

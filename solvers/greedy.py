@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable
 
-from tsac_bench.model.evaluator import CostEvaluator, PlanState
+from tsac_bench.model.evaluator import PlanState
 from tsac_bench.planning import PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import best_insertion
 
@@ -58,6 +58,6 @@ class GreedyAllocator(Settings):
              time_limit: float | None = None) -> PlanResult:
         del seed  # deterministic by construction
         deadline = None if time_limit is None else time.perf_counter() + time_limit
-        plan = CostEvaluator(state.instance).state(state.base_routes())
+        plan = state.evaluator().state(state.base_routes())
         insertions, stopped = insert_cheapest(plan, state, deadline_order(state), deadline)
         return PlanResult(plan.routes, {"insertions": insertions, "stop": stopped})

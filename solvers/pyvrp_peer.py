@@ -27,7 +27,7 @@ from importlib.metadata import version
 import pyvrp
 
 from tsac_bench.model import Instance, Route, Visit
-from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.evaluator import CostEvaluator, departure_and_arrival
 from tsac_bench.planning import Interval, NoneOr, PlanningState, PlanResult, Settings, declare
 from tsac_bench.planning.insertion import removal_route, top_up
 from tsac_bench.solvers.greedy import deadline_order, insert_cheapest
@@ -69,7 +69,7 @@ class PyVRPAllocator(Settings):
         params = pyvrp.SolveParams(penalty=pyvrp.PenaltyParams(max_penalty=1e12))
         result = pyvrp.solve(mapping.problem_data(), stop, seed=seed, display=False,
                              params=params)
-        evaluator = CostEvaluator(state.instance)
+        evaluator = state.evaluator()
         decoded = tuple(_repair(state, evaluator, n, route)
                         for n, route in enumerate(mapping.decode(result.best)))
         # Pieces PyVRP served by returning to a task in another trip cannot be kept (a task
@@ -103,16 +103,18 @@ class _Mapping:
         # Each AAV's free part starts at a depot, so that PyVRP's "deliveries are loaded at the
         # start" holds: the depot of its committed prefix's end, or else the depot nearest to
         # where it is (the start position or the task it is flying to), reached first.
-        self.origins: list[tuple[int, float]] = []  # (depot node, time the AAV is there)
-        evaluator = CostEvaluator(instance)
-        for n, (aav, closed) in enumerate(zip(instance.aavs, state.base_routes(), strict=True)):
-            if closed:
-                trace = evaluator.trace(n, closed)
-                self.origins.append((closed[-1].node, trace.arrivals[-1]))
+        # PyVRP's vehicle leaves its start depot no earlier than its time window opens: the
+        # time the AAV can leave that depot for visits planned now.
+        self.origins: list[tuple[int, float]] = []  # (depot node, time the AAV can leave it)
+        for n, aav in enumerate(instance.aavs):
+            anchor = state.anchor(n)
+            if instance.is_depot(anchor.node):
+                self.origins.append((anchor.node, anchor.time))
                 continue
-            start = instance.start_node(n)
-            depot = instance.nearest_depot(start)
-            self.origins.append((depot, float(instance.dist[start, depot]) / aav.speed))
+            depot = instance.nearest_depot(anchor.node)
+            _, there = departure_and_arrival(anchor.time, None, float(
+                instance.dist[anchor.node, depot]) / aav.speed, 0.0)
+            self.origins.append((depot, there))
         self.pieces: list[tuple[int, int]] = []  # (task, amount)
         for m in sorted(state.visible):
             demand = instance.tasks[m].demand

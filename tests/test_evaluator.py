@@ -124,3 +124,73 @@ def test_plan_state_tracks_cost_and_coverage(hand):
     assert delta == pytest.approx(50 + 10 * 250 / 3600 + 0.015625 - UNSERVED, rel=1e-15)
     assert state.covered(0) == 5 and state.covered(0, exclude=1) == 0
     assert state.propose(0, plan(hand, A0=[("T3", 5), "D0"]).routes[0]) is None
+
+
+def stamped(instance, aav, visits):
+    """Routes with stamps: ``visits`` are Visit keyword dicts by id (node, amount,
+    planned_at, load); other AAVs idle."""
+    from tsac_bench.model import Visit
+
+    route = tuple(Visit(instance.node_index[v["node"]], v.get("amount", 0),
+                        v.get("planned_at"), v.get("load")) for v in visits)
+    return tuple(route if a.id == aav else () for a in instance.aavs)
+
+
+def test_planned_at_delays_the_departure_not_the_arrival_of_an_earlier_plan(hand):
+    # A1 (20 m/s) to T3 (2 km south, window [0, 3600]) and home. Planned at 400 s, it leaves
+    # the start at 400 and reaches T3 at 500, D0 at 600; a stamp earlier than the arrival
+    # changes nothing (D0 planned at 450 s, reached at 600).
+    routes = stamped(hand, "A1", [{"node": "D0"}, {"node": "T3", "amount": 10,
+                                                   "planned_at": 400.0},
+                                  {"node": "D0", "planned_at": 450}])
+    result = CostEvaluator(hand).evaluate(routes)
+    trace = result.traces[1]
+    assert trace.departures == (0.0, 400.0, 500.0)
+    assert trace.arrivals == (0.0, 500.0, 600.0)
+    # T3: full, C_time = 500 / 3600, q = 10 * 2 / 3200.
+    assert pytest.approx(10 * 500 / 3600 + 0.00625 + 3 * UNSERVED, rel=1e-15) == result.J
+
+
+def test_a_recorded_load_bounds_the_deliveries_of_its_trip(hand):
+    # D0 loaded 10 kg: T1 (10 kg) fits, T1 and T3 (20 kg) do not; any delivery may use them.
+    fits = stamped(hand, "A0", [{"node": "D0", "load": 10}, {"node": "T3", "amount": 10},
+                                {"node": "D0"}])
+    assert CostEvaluator(hand).evaluate(fits).feasible
+    beyond = stamped(hand, "A0", [{"node": "D0", "load": 10}, {"node": "T1", "amount": 10},
+                                  {"node": "T3", "amount": 10}, {"node": "D0"}])
+    result = CostEvaluator(hand).evaluate(beyond)
+    assert [(e.code, e.position) for e in result.errors] == [("load-exceeded", 0)]
+    assert "need 20 kg but it loaded 10 kg" in str(result.errors[0])
+
+
+@pytest.mark.parametrize(("visits", "code", "position"), [
+    ([{"node": "T0", "amount": 5, "planned_at": -1.0}, {"node": "D0"}], "bad-planned-at", 0),
+    ([{"node": "T0", "amount": 5, "planned_at": float("nan")}, {"node": "D0"}],
+     "bad-planned-at", 0),
+    ([{"node": "T0", "amount": 5, "planned_at": "10"}, {"node": "D0"}], "bad-planned-at", 0),
+    ([{"node": "T0", "amount": 5, "planned_at": True}, {"node": "D0"}], "bad-planned-at", 0),
+    ([{"node": "T0", "amount": 5, "load": 5}, {"node": "D0"}], "bad-load", 0),
+    ([{"node": "D0", "load": 2.0}, {"node": "T3", "amount": 1}, {"node": "D0"}], "bad-load", 0),
+    ([{"node": "D0", "load": -1}, {"node": "D0"}], "bad-load", 0),
+])
+def test_malformed_stamps_are_named(hand, visits, code, position):
+    result = CostEvaluator(hand).evaluate(stamped(hand, "A0", visits))
+    assert [(e.code, e.position) for e in result.errors][:1] == [(code, position)]
+
+
+def test_a_planning_moment_prices_free_visits_as_planned_then(hand):
+    # The evaluator of a re-plan at 400 s with A1's first visit committed times the rest as
+    # the simulator will stamp it: the same route, stamped, costs the same offline.
+    from tsac_bench.model import Visit
+    from tsac_bench.planning import PlanningState
+
+    d0, t3 = hand.node_index["D0"], hand.node_index["T3"]
+    state = PlanningState(hand, 400.0, frozenset(range(hand.n_tasks)),
+                          ((), (Visit(d0),)))
+    route = (Visit(d0), Visit(t3, 10), Visit(d0))
+    planned = state.evaluator().evaluate(((), route))
+    assert planned.traces[1].arrivals == (0.0, 500.0, 600.0)
+    stamped_route = (Visit(d0), Visit(t3, 10, 400.0), Visit(d0, 0, 400.0))
+    assert CostEvaluator(hand).cost(((), stamped_route)) == planned.J
+    assert state.anchor(1) == (d0, 400.0, 0.0, None)
+    assert state.anchor(0) == (hand.start_node(0), 400.0, 0.0, 0)

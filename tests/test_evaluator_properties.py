@@ -45,7 +45,7 @@ def test_dropping_a_late_visit_never_raises_J(scale, instance_seed, plan_seed):
     routes = random_plan(instance, plan_seed)
     before = evaluator.evaluate(routes)
     for n, trace in enumerate(before.traces):
-        for k, (node, _) in enumerate(trace.route):
+        for k, node in enumerate(v.node for v in trace.route):
             if node < instance.n_tasks and \
                     trace.arrivals[k] > instance.tasks[node].t_end + TIME_TOLERANCE:
                 dropped = list(routes)

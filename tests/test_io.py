@@ -219,3 +219,22 @@ def test_non_finite_numbers_are_one_line_naming_file_and_field(tmp_path, data_di
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {file}: {_field_text(path)}: ")
     assert lines[0].endswith(f"got {value!r}")
+
+
+def test_stamps_round_trip_and_offline_files_stay_as_they_were(tmp_path, hand, data_dir):
+    from tsac_bench.model import Visit
+
+    d0, t1 = hand.node_index["D0"], hand.node_index["T1"]
+    solution = Solution(hand.name, ((), (Visit(d0, load=10), Visit(t1, 10, planned_at=25.5),
+                                         Visit(d0, planned_at=25.5))))
+    write_solution(solution, hand, tmp_path / "s.json")
+    assert read_solution(tmp_path / "s.json", hand) == solution
+    written = json.loads((tmp_path / "s.json").read_text())
+    assert written["routes"]["A1"] == [{"node": "D0", "load": 10},
+                                       {"node": "T1", "amount": 10, "planned_at": 25.5},
+                                       {"node": "D0", "planned_at": 25.5}]
+    # An offline file reads without stamps and is written back exactly as it was.
+    original = json.loads((data_dir / "hand-solution.json").read_text())
+    offline = read_solution(data_dir / "hand-solution.json", hand)
+    assert all(v.planned_at is None and v.load is None for r in offline.routes for v in r)
+    assert solution_to_dict(offline, hand)["routes"] == original["routes"]

@@ -44,8 +44,16 @@ from typing import Any, ClassVar, NamedTuple, Protocol
 import numpy as np
 
 from tsac_bench.model import Route
-from tsac_bench.model.evaluator import CostEvaluator, PlanState, Proposal
-from tsac_bench.planning import Interval, Options, PlanningState, PlanResult, Settings, declare
+from tsac_bench.model.evaluator import PlanState, Proposal
+from tsac_bench.planning import (
+    Anchor,
+    Interval,
+    Options,
+    PlanningState,
+    PlanResult,
+    Settings,
+    declare,
+)
 from tsac_bench.planning.insertion import best_insertion, removal_route
 
 #: A move must lower J by more than this to count as a strict decrease (Eq. 22): J is a sum
@@ -53,15 +61,6 @@ from tsac_bench.planning.insertion import best_insertion, removal_route
 STRICT_DECREASE = 1e-9
 
 ADD, REMOVE = "add", "remove"
-
-
-class Anchor(NamedTuple):
-    """Where AAV n's free route begins: the node it last committed to (its start position
-    when nothing is committed), the time it leaves it and the distance flown to get there."""
-
-    node: int
-    time: float
-    flown: float
 
 
 class Move(NamedTuple):
@@ -86,9 +85,9 @@ def structure_key(n: int, route: Route, n_tasks: int) -> int:
     """AAV n's part of the coalition-structure key: its (task, amount) memberships. The
     whole structure's key is the XOR over AAVs, so one AAV's change updates it in O(route)."""
     key = 0
-    for node, amount in route:
-        if node < n_tasks:
-            key ^= hash((n, node, amount))
+    for v in route:
+        if v.node < n_tasks:
+            key ^= hash((n, v.node, v.amount))
     return key
 
 
@@ -98,11 +97,12 @@ class CoalitionGame:
     def __init__(self, state: PlanningState, routes: Sequence[Route] | None = None) -> None:
         self.state = state
         self.instance = instance = state.instance
-        self.evaluator = CostEvaluator(instance)
+        self.evaluator = state.evaluator()
         self.plan: PlanState = self.evaluator.state(
             routes if routes is not None else state.base_routes())
         self.n_aavs, self.n_tasks = instance.n_aavs, instance.n_tasks
         self.first_free = [state.first_free(n) for n in range(self.n_aavs)]
+        self.anchors = [state.anchor(n) for n in range(self.n_aavs)]
         self.visible = sorted(state.visible)
         self._dist = instance.dist_rows
         self._latest_on_time = [t.latest_on_time for t in instance.tasks]
@@ -129,12 +129,8 @@ class CoalitionGame:
         return self.plan.traces[n].route
 
     def anchor(self, n: int) -> Anchor:
-        ff = self.first_free[n]
-        if ff == 0:
-            return Anchor(self.instance.start_node(n), 0.0, 0.0)
-        trace = self.plan.traces[n]
-        return Anchor(trace.route[ff - 1].node, trace.arrivals[ff - 1],
-                      trace.distance_at_arrival[ff - 1])
+        """Where AAV n's free route begins and when it can leave (fixed by its prefix)."""
+        return self.anchors[n]
 
     def residual(self, n: int, m: int) -> int:
         """Eq. 19: task m's demand less what the AAVs other than n bring on time."""

@@ -55,3 +55,17 @@ def test_polish_never_worsens_and_improves_random_plans() -> None:
         assert after.cost == pytest.approx(CostEvaluator(instance).cost(after.routes))
         improved += after.cost < before - 1e-9
     assert improved >= 3
+
+
+def test_polishing_a_dynamic_run_keeps_its_stamps_and_recorded_loads(hand):
+    # A0 (30 kg) left D0 with 10 kg on record: T1 (20 kg) and T3 (10 kg) would take 30 kg
+    # offline, but this trip can deliver only the 10 kg it loaded; the stamps stay.
+    d0, t1, t3 = (hand.node_index[i] for i in ("D0", "T1", "T3"))
+    route = (Visit(d0, load=10), Visit(t1, 5, planned_at=100.0), Visit(t3, 5, planned_at=100.0),
+             Visit(d0, planned_at=100.0))
+    polished = polish_routes(hand, (route, ()))
+    assert CostEvaluator(hand).evaluate(polished).feasible
+    assert [v.planned_at for v in polished[0]] == [None, 100.0, 100.0, 100.0]
+    assert polished[0][1].amount + polished[0][2].amount <= 10
+    unrecorded = tuple(v._replace(load=None) for v in route)
+    assert sum(v.amount for v in polish_routes(hand, (unrecorded, ()))[0]) == 30

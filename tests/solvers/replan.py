@@ -11,5 +11,5 @@ def replan_state(instance: Instance, routes: tuple[Route, ...], t: float) -> Pla
     """MODEL.md's committed prefixes at ``t`` > 0 and the tasks released by ``t``."""
     evaluator = CostEvaluator(instance)
     traces = [evaluator.trace(n, route) for n, route in enumerate(routes)]
-    return PlanningState(instance, t, instance.released_by(t), committed_prefixes(traces, t),
-                         routes)
+    return PlanningState(instance, t, instance.released_by(t),
+                         committed_prefixes(instance, traces, t), routes)

@@ -3,6 +3,7 @@ planning states are solved exactly, and no method beats a proven optimum."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import shutil
 from pathlib import Path
@@ -60,12 +61,14 @@ def _no_method_beats(names: list[str]) -> None:
     for name in names:
         instance = regression(name)
         J_star = MANIFEST[name]["J_star"] or MANIFEST[name]["lower_bound"]
-        for method in others:
+        # A dynamic run is physical and no better than offline: J* bounds it too.
+        modes = ["static", "dynamic"] if "release" in name else ["static"]
+        for method, mode in itertools.product(others, modes):
             try:
-                outcome = solve(instance, method, seed=0, time_limit=2.0)
+                outcome = solve(instance, method, seed=0, time_limit=2.0, mode=mode)
             except MethodUnavailable:
                 continue
-            assert J_star <= outcome.cost + 1e-6 * max(1.0, outcome.cost), (name, method)
+            assert J_star <= outcome.cost + 1e-6 * max(1.0, outcome.cost), (name, method, mode)
 
 
 def test_no_method_beats_the_optimum_fast_subset() -> None:
@@ -125,7 +128,7 @@ def test_a_dynamic_state_is_solved_over_its_visible_tasks_after_its_prefixes() -
     result = ExactAllocator().plan(state)
     assert state.violations(result.routes) == []
     completion = GreedyAllocator().plan(state).routes
-    evaluator = CostEvaluator(instance)
+    evaluator = state.evaluator()  # the free visits leave no earlier than t = 50
     assert result.stats["J"] <= evaluator.cost(completion) + 1e-9
     assert result.stats["objective"] == pytest.approx(result.stats["J"], rel=1e-6)
     hidden = [b for m, b in enumerate(evaluator.evaluate(result.routes).per_task)

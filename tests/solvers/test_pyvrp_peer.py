@@ -37,7 +37,7 @@ def test_mapping_keeps_windows_and_capacities(seed):
     for n, route in enumerate(mapping.decode(result.best)):
         trace = evaluator.trace(n, route)
         assert trace.errors == ()  # capacities and loads as PyVRP saw them
-        for (node, _), arrival in zip(route, trace.arrivals, strict=True):
+        for node, arrival in zip((v.node for v in route), trace.arrivals, strict=True):
             if node < instance.n_tasks:
                 assert arrival <= instance.tasks[node].t_end + TIME_TOLERANCE
 

@@ -38,6 +38,30 @@ def cost_at_least(value: float, floor: float) -> bool:
     return value >= floor - COST_TOLERANCE * max(1.0, abs(value), abs(floor))
 
 
+def departure(previous_arrival: float, planned_at: float | None) -> float:
+    """When the AAV leaves the previous node: once it has reached it and the plan that sends
+    it on has been made (dep_k = max(tau_{k-1}, planned_at_k), MODEL.md "Time")."""
+    if planned_at is not None and planned_at > previous_arrival:
+        return planned_at
+    return previous_arrival
+
+
+def departure_and_arrival(previous_arrival: float, planned_at: float | None, travel: float,
+                          t_start: float) -> tuple[float, float]:
+    """Eq. 7 with the dynamic run's stamps, the one place the timing rule lives: the AAV
+    leaves as ``departure`` says and waits at the next node for its window
+    (tau_k = max(t_start, dep_k + L / v))."""
+    leaves = departure(previous_arrival, planned_at)
+    arrival = leaves + travel
+    if arrival < t_start:
+        arrival = t_start
+    return leaves, arrival
+
+
+def _is_time(value: object) -> bool:
+    return type(value) in (int, float) and math.isfinite(value) and value >= 0
+
+
 @dataclass(frozen=True, slots=True)
 class FeasibilityError:
     """One violated rule of MODEL.md, located by AAV and visit position."""
@@ -67,6 +91,7 @@ class RouteTrace:
     aav: int
     route: Route
     errors: tuple[FeasibilityError, ...]
+    departures: tuple[float, ...]  # when the AAV leaves the previous node
     arrivals: tuple[float, ...]
     delivery_load: tuple[int, ...]  # d after the visit
     pickup_load: tuple[int, ...]  # p after the visit
@@ -141,6 +166,7 @@ class Evaluation:
                 {
                     "aav": instance.aavs[t.aav].id,
                     "nodes": [ids[v.node] for v in t.route],
+                    "departures": list(t.departures),
                     "arrivals": list(t.arrivals),
                     "delivery_load": list(t.delivery_load),
                     "pickup_load": list(t.pickup_load),
@@ -154,10 +180,19 @@ class Evaluation:
 
 
 class CostEvaluator:
-    """Evaluates routes of one instance; build once, call many times."""
+    """Evaluates routes of one instance; build once, call many times.
 
-    def __init__(self, instance: Instance) -> None:
+    A planner at a re-plan of a dynamic run passes the time of the plan and each AAV's first
+    free position: visits from there on are timed as planned at ``plan_time``, the stamp the
+    simulator writes on them (MODEL.md, "The dynamic run"), so that what it prices is what
+    will be executed. The default (0, nothing committed) is the offline model."""
+
+    def __init__(self, instance: Instance, plan_time: float = 0.0,
+                 first_free: Sequence[int] | None = None) -> None:
         self.instance = instance
+        self.plan_time = float(plan_time)
+        self.first_free = tuple(first_free) if first_free is not None else \
+            (0,) * instance.n_aavs
         self.n_tasks = instance.n_tasks
         self.n_nodes = instance.n_tasks + instance.n_depots
         self.w1, self.w2, self.w3 = instance.weights
@@ -195,7 +230,7 @@ class CostEvaluator:
         depot_load = [0] * len(route)
         pending = 0
         for k in range(len(route) - 1, -1, -1):
-            node, amount = route[k]
+            node, amount = route[k].node, route[k].amount
             if type(node) is not int or not 0 <= node < n_nodes:
                 fail("unknown-node", k, f"unknown node {node!r}")
                 return self._failed(n, route, errors)
@@ -209,22 +244,40 @@ class CostEvaluator:
         max_range = self._range[n]
         op_per_metre, op_over_range = self._op_per_metre[n], self._op_over_range[n]
         dist, t_start = self._dist, self._t_start
-        arrivals, d_loads, p_loads, dcums, ops = [], [], [], [], []
+        departures, arrivals, d_loads, p_loads, dcums, ops = [], [], [], [], [], []
         contributions = []
         seen: set[int] = set()
+        plan_time = self.plan_time if self.plan_time > 0 else None
+        first_free = self.first_free[n]
         prev, clock, flown, d, p = self._start[n], 0.0, 0.0, 0, 0
-        for k, (node, amount) in enumerate(route):
+        for k, (node, amount, planned_at, load) in enumerate(route):
+            if planned_at is not None and not _is_time(planned_at):
+                fail("bad-planned-at", k, f"planned_at must be a finite number of seconds "
+                     f">= 0, got {planned_at!r}")
+                planned_at = None
+            if plan_time is not None and k >= first_free and \
+                    (planned_at is None or planned_at < plan_time):
+                planned_at = plan_time
             leg = dist[prev][node]
             flown += leg
-            arrival = clock + leg / speed
-            if arrival < t_start[node]:
-                arrival = t_start[node]
+            departure, arrival = departure_and_arrival(clock, planned_at, leg / speed,
+                                                       t_start[node])
             q = 0.0
             if node >= n_tasks:
                 if amount != 0 or type(amount) is not int:
                     fail("depot-amount", k, f"a depot visit carries no amount, got {amount!r}")
+                if load is not None:
+                    if type(load) is not int or load < 0:
+                        fail("bad-load", k, f"a depot visit's load must be an integer >= 0 "
+                             f"kg, got {load!r}")
+                    elif depot_load[k] > load:
+                        fail("load-exceeded", k, f"the deliveries after depot "
+                             f"{self._node_id(node)} need {depot_load[k]} kg but it loaded "
+                             f"{load} kg")
                 d, p = depot_load[k], 0
             else:
+                if load is not None:
+                    fail("bad-load", k, f"a task visit carries no load, got {load!r}")
                 if node in seen:
                     fail("repeated-task", k, f"task {self._node_id(node)} is visited twice")
                 seen.add(node)
@@ -243,6 +296,7 @@ class CostEvaluator:
                 contributions.append((node, Contribution(amount, arrival, q)))
             if d + p > capacity:
                 fail("over-capacity", k, f"load {d + p} kg exceeds the capacity {capacity} kg")
+            departures.append(departure)
             arrivals.append(arrival)
             d_loads.append(d)
             p_loads.append(p)
@@ -251,11 +305,12 @@ class CostEvaluator:
             prev, clock = node, arrival
         if route and route[-1][0] < n_tasks:
             fail("no-final-depot", len(route) - 1, "a non-empty route must end at a depot")
-        return RouteTrace(n, tuple(route), tuple(errors), tuple(arrivals), tuple(d_loads),
-                          tuple(p_loads), tuple(dcums), tuple(ops), tuple(contributions), flown)
+        return RouteTrace(n, tuple(route), tuple(errors), tuple(departures), tuple(arrivals),
+                          tuple(d_loads), tuple(p_loads), tuple(dcums), tuple(ops),
+                          tuple(contributions), flown)
 
     def _failed(self, n: int, route: Sequence[Visit], errors: list) -> RouteTrace:
-        return RouteTrace(n, tuple(route), tuple(errors), (), (), (), (), (), (), math.nan)
+        return RouteTrace(n, tuple(route), tuple(errors), (), (), (), (), (), (), (), math.nan)
 
     def _node_id(self, node: int) -> str:
         return self.instance.node_ids[node]

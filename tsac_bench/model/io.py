@@ -93,8 +93,11 @@ class InstanceRecord(_Schema):
 
 class VisitRecord(_Schema):
     node: StrictStr
-    # Kept as parsed: the evaluator, not the parser, rules on 2.0, true or a depot amount.
+    # Kept as parsed: the evaluator, not the parser, rules on 2.0, true or a depot amount
+    # (and on the dynamic run's stamps below).
     amount: Any = None
+    planned_at: Any = None
+    load: Any = None
 
 
 class SolutionRecord(_Schema):
@@ -215,21 +218,28 @@ def solution_from_dict(data: Any, instance: Instance, source: str = "<solution>"
             amount = v.amount
             if instance.is_depot(node) and amount is None:
                 amount = 0
-            visits.append(Visit(node, amount))
+            visits.append(Visit(node, amount, v.planned_at, v.load))
         routes.append(tuple(visits))
     return Solution(record.instance, tuple(routes), record.cost, record.meta)
 
 
 def solution_to_dict(solution: Solution, instance: Instance) -> dict[str, Any]:
     ids = instance.node_ids
-    routes = {
-        aav.id: [
-            {"node": ids[v.node]} if instance.is_depot(v.node)
-            else {"node": ids[v.node], "amount": v.amount}
-            for v in route
-        ]
-        for aav, route in zip(instance.aavs, solution.routes, strict=True)
-    }
+
+    def record(v: Visit) -> dict[str, Any]:
+        data: dict[str, Any] = {"node": ids[v.node]}
+        if not instance.is_depot(v.node):
+            data["amount"] = v.amount
+        # The dynamic run's stamps are written only where present: offline files stay as
+        # they were.
+        if v.load is not None:
+            data["load"] = v.load
+        if v.planned_at is not None:
+            data["planned_at"] = v.planned_at
+        return data
+
+    routes = {aav.id: [record(v) for v in route]
+              for aav, route in zip(instance.aavs, solution.routes, strict=True)}
     return {"format": SOLUTION_FORMAT, "instance": solution.instance, "routes": routes,
             "cost": solution.cost, "meta": dict(solution.meta)}
 

@@ -2,7 +2,8 @@
 
 In memory a visit names its node by index (see ``Instance``) so that allocators and the
 evaluator never hash strings on the hot path; ids appear only at the file boundary.
-A depot visit has ``amount == 0``.
+A depot visit has ``amount == 0``. ``planned_at`` and ``load`` are the dynamic run's stamps
+(MODEL.md, "The dynamic run"): None where absent, as in every offline solution.
 """
 
 from __future__ import annotations
@@ -18,6 +19,10 @@ from tsac_bench.model.instance import Instance
 class Visit(NamedTuple):
     node: int
     amount: int = 0
+    #: The time of the plan that sent the AAV here: it leaves the previous node no earlier.
+    planned_at: float | None = None
+    #: On a depot visit the AAV has left: the delivery goods it loaded there (kg).
+    load: int | None = None
 
 
 Route = tuple[Visit, ...]

@@ -9,6 +9,7 @@ This package is what a plug-in author imports; it depends only on ``tsac_bench.m
 from tsac_bench.planning.allocator import (
     ALL_MODES,
     Allocator,
+    Anchor,
     PlanningState,
     PlanResult,
     Settings,
@@ -45,6 +46,7 @@ __all__ = [
     "BUILTIN_METHODS",
     "ENTRY_POINT_GROUP",
     "Allocator",
+    "Anchor",
     "Boolean",
     "Constraint",
     "ExistingFile",

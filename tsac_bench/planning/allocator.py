@@ -10,10 +10,26 @@ from __future__ import annotations
 import inspect
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.planning.settings import Constraint
+
+if TYPE_CHECKING:
+    from tsac_bench.model.evaluator import CostEvaluator
+
+
+class Anchor(NamedTuple):
+    """Where AAV n's free route begins at a planning moment: the node it last committed to
+    (its start position when nothing is committed), the earliest time it can leave it for a
+    visit planned now, the distance flown to get there, and the delivery goods it will have
+    on board there from the last depot it left (None when the anchor is a depot, where it
+    loads what the new plan needs, or when that depot's load was not recorded)."""
+
+    node: int
+    time: float
+    flown: float
+    on_board: int | None
 
 
 @dataclass(frozen=True)
@@ -21,8 +37,12 @@ class PlanningState:
     """What an allocator may use at one planning moment.
 
     ``visible`` tasks are the released ones the allocator may visit; every AAV's new route
-    must start with its ``committed`` prefix (MODEL.md, the dynamic run). ``incumbent`` is the
-    plan in force before this moment, a warm start for methods that want one.
+    must start with its ``committed`` prefix (MODEL.md, the dynamic run), stamps included.
+    Every visit a plan places after the prefix counts as planned at ``time``: the AAV leaves
+    its anchor no earlier (``anchor``), and ``evaluator()`` prices routes so. A depot visit
+    the AAV has left carries the goods it loaded, which later deliveries of that trip may not
+    exceed. ``incumbent`` is the plan in force before this moment, a warm start for methods
+    that want one.
     """
 
     instance: Instance
@@ -43,6 +63,39 @@ class PlanningState:
     def first_free(self, n: int) -> int:
         """Index of AAV n's first visit that the plan may change."""
         return len(self.committed[n])
+
+    def evaluator(self) -> CostEvaluator:
+        """The evaluator that prices this moment's plans as they will be executed: every
+        visit after a committed prefix planned at ``time``."""
+        from tsac_bench.model.evaluator import CostEvaluator
+
+        return CostEvaluator(self.instance, self.time,
+                             [self.first_free(n) for n in range(self.instance.n_aavs)])
+
+    def anchor(self, n: int) -> Anchor:
+        """AAV n's anchor: where, from when and with which goods its free route begins."""
+        from tsac_bench.model.evaluator import CostEvaluator, departure
+
+        prefix = self.committed[n]
+        if not prefix:
+            # The start position is no depot: deliveries need one first.
+            return Anchor(self.instance.start_node(n), departure(0.0, self.time), 0.0, 0)
+        trace = CostEvaluator(self.instance).trace(n, prefix)
+        ready = departure(trace.arrivals[-1], self.time)
+        if self.instance.is_depot(prefix[-1].node):
+            return Anchor(prefix[-1].node, ready, trace.distance_at_arrival[-1], None)
+        n_tasks, tasks = self.instance.n_tasks, self.instance.tasks
+        on_board = 0
+        for v in reversed(prefix):
+            if v.node >= n_tasks:
+                if v.load is None:
+                    on_board = None
+                else:
+                    on_board += v.load
+                break
+            if tasks[v.node].is_delivery:
+                on_board -= v.amount
+        return Anchor(prefix[-1].node, ready, trace.distance_at_arrival[-1], on_board)
 
     def base_routes(self) -> tuple[Route, ...]:
         """The committed prefixes made into feasible routes: a prefix that stops at a task
@@ -77,7 +130,8 @@ class PlanningState:
         return tuple(warm)
 
     def violations(self, routes: Sequence[Route]) -> list[str]:
-        """What in ``routes`` this state forbids (changed prefix, invisible task)."""
+        """What in ``routes`` this state forbids (changed prefix, invisible task, a stamp on
+        a visit after the prefix: only the simulator writes ``planned_at`` and ``load``)."""
         problems = []
         if len(routes) != self.instance.n_aavs:
             return [f"{len(routes)} routes for {self.instance.n_aavs} AAVs"]
@@ -87,6 +141,9 @@ class PlanningState:
             if tuple(route[: len(prefix)]) != prefix:
                 problems.append(f"{aav}: the committed prefix was changed")
             for v in route[len(prefix):]:
+                if v.load is not None or v.planned_at is not None:
+                    problems.append(f"{aav}: a planned visit carries a stamp (planned_at, "
+                                    "load): the simulator writes them")
                 if v.node < n_tasks and v.node not in self.visible:
                     problems.append(f"{aav}: visits task {self.instance.tasks[v.node].id} "
                                     f"which is not visible at t={self.time:g}")

@@ -37,22 +37,27 @@ def insertion_routes(instance: Instance, n: int, route: Route, task: int, first_
 
 def max_amount(instance: Instance, trace: RouteTrace, index: int) -> int:
     """Largest amount the task visit at ``index`` of a feasible route could carry, the other
-    visits unchanged: the capacity slack over the stretch its goods are on board."""
+    visits unchanged: the capacity slack over the stretch its goods are on board, and for a
+    delivery from a depot the AAV has already left, what it loaded there and the trip does
+    not use yet."""
     route, loads = trace.route, trace.loads
     is_depot = instance.is_depot
+    capacity = instance.aavs[trace.aav].capacity
     if instance.tasks[route[index].node].is_delivery:
         # Loaded at the last depot visit before it, on board until it is delivered.
         start = index - 1
         while not is_depot(route[start].node):
             start -= 1
-        stretch = loads[start:index]
+        room = capacity - max(loads[start:index])
+        if route[start].load is not None:
+            room = min(room, route[start].load - trace.delivery_load[start])
     else:
         # Picked up here, on board until the next depot visit unloads it.
         end = index
         while not is_depot(route[end].node):
             end += 1
-        stretch = loads[index:end]
-    return route[index].amount + instance.aavs[trace.aav].capacity - max(stretch)
+        room = capacity - max(loads[index:end])
+    return route[index].amount + room
 
 
 def best_insertion(state: PlanState, n: int, task: int, first_free: int = 0,
@@ -121,7 +126,7 @@ def top_up(plan: PlanState, first_free: Sequence[int]) -> int:
     for n in range(instance.n_aavs):
         for k in range(first_free[n], len(plan.traces[n].route)):
             trace = plan.traces[n]
-            node, amount = trace.route[k]
+            node, amount = trace.route[k].node, trace.route[k].amount
             if node >= instance.n_tasks or \
                     not tasks[node].on_time(trace.arrivals[k]):
                 continue

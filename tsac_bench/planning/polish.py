@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from tsac_bench.model import Instance, Route, Solution, Visit
+from tsac_bench.model import Instance, Route, Solution
 from tsac_bench.model.evaluator import CostEvaluator
 
 
@@ -55,7 +55,9 @@ def polish_routes(instance: Instance, routes: Sequence[Route]) -> tuple[Route, .
             if first == -1 and deliveries:
                 raise ValueError(f"route of {instance.aavs[n].id} delivers before a depot")
             if first >= 0 and deliveries:  # the depot loads every delivery of the trip
-                constraints.append(sum(a[index[n, k]] for k in deliveries) <= capacity)
+                loaded = route[first].load  # a dynamic run's record of what it loaded
+                limit = capacity if loaded is None else min(capacity, loaded)
+                constraints.append(sum(a[index[n, k]] for k in deliveries) <= limit)
             for k in trip:
                 ahead = [a[index[n, i]] for i in deliveries if i > k]
                 behind = [a[index[n, i]] for i in pickups if i <= k]
@@ -75,7 +77,7 @@ def polish_routes(instance: Instance, routes: Sequence[Route]) -> tuple[Route, .
         return routes
     amounts = [round(float(x)) for x in a.value]
     polished = tuple(
-        tuple(v if instance.is_depot(v.node) else Visit(v.node, amounts[index[n, k]])
+        tuple(v if instance.is_depot(v.node) else v._replace(amount=amounts[index[n, k]])
               for k, v in enumerate(route))
         for n, route in enumerate(routes))
     result = evaluator.evaluate(polished)

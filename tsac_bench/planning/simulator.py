@@ -5,23 +5,27 @@ Rules (docs/model.md, "The dynamic run"):
 
 * At t = 0 the allocator sees the tasks released at 0 and plans freely.
 * At each distinct release time t_e > 0, AAV n's committed prefix is every visit k of the
-  plan in force whose previous node it has left by t_e (tau_{k-1} <= t_e; the start position
+  plan in force whose previous node it has left by t_e (dep_k <= t_e; the start position
   counts as left at time 0). The allocator then plans again and may change anything after the
   prefixes, never the prefixes.
+* Physics is written into the routes (MODEL.md): every visit a plan at t_e > 0 places after
+  the prefixes gets ``planned_at = t_e`` (the AAV leaves no earlier; an idle AAV leaves at
+  t_e, not at its last arrival), and a depot visit the AAV has left by t_e gets ``load`` =
+  the delivery goods the plan in force had it carry (a later plan may not deliver more from
+  that trip). Depots left after the last re-plan load what the executed route delivers, which
+  is Eq. 10 itself, so they need no record; a run without events has no stamps at all.
 * The allocator sees the released tasks that are not yet finished. A task is *finished* at
   t_e when its committed visits already cover its demand on time, or when its window has
   closed (t_end < t_e): a visit made after t_e cannot lower its cost (C_load is already 0
-  or the visit is late; it only adds C_op or makes C_time 1). Hiding closed tasks also keeps
-  an idle AAV, timed from its last arrival, from serving a task "in the past".
-* Every plan is checked: it must keep every prefix, visit only visible tasks and be feasible.
-  A plan that breaks a rule stops the run with ``InvalidPlan``.
+  or the visit is late; it only adds C_op or makes C_time 1).
+* Every plan is checked: it must keep every prefix (stamps included), visit only visible
+  tasks, write no stamp itself and be feasible with its stamps (no delivery beyond a
+  recorded load). A plan that breaks a rule stops the run with ``InvalidPlan``.
 * The executed routes are the last plan's routes (nothing changes after the last event);
   they are evaluated from scratch. Tasks never served cost w1 + w2 like any other.
 
-An AAV whose plan has ended (or is empty) may receive new visits at a re-plan; Eq. 7 times
-them from its last arrival (MODEL.md has no idle wait). The release guarantee is an
-information guarantee: an allocator only ever sees released tasks and cannot change a
-committed prefix.
+The release guarantee is an information guarantee: an allocator only ever sees released
+tasks and cannot change a committed prefix; the stamps make the executed routes physical.
 """
 
 from __future__ import annotations
@@ -48,9 +52,11 @@ class InvalidPlan(TsacBenchError):
 
 @dataclass(frozen=True)
 class CheckedPlan:
-    """One plan call that passed every check, with the evaluator's verdict."""
+    """One plan call that passed every check: its routes with the stamps of its planning
+    moment, and the evaluator's verdict on them."""
 
     result: PlanResult
+    routes: tuple[Route, ...]
     evaluation: Evaluation
     wall_time: float
 
@@ -66,25 +72,38 @@ def checked_plan(allocator: Allocator, state: PlanningState, *, seed: int,
     problems = state.violations(result.routes)
     if problems:
         raise InvalidPlan(f"{where}: " + "; ".join(problems))
-    evaluation = CostEvaluator(instance).evaluate(result.routes)
+    routes = stamped(state, result.routes)
+    evaluation = CostEvaluator(instance).evaluate(routes)
     if not evaluation.feasible:
         raise InvalidPlan(f"{where}: infeasible plan: "
                           + "; ".join(str(e) for e in evaluation.errors))
-    return CheckedPlan(result, evaluation, wall)
+    return CheckedPlan(result, routes, evaluation, wall)
 
 
-def committed_prefixes(traces: Sequence[RouteTrace], t: float) -> tuple[Route, ...]:
+def stamped(state: PlanningState, routes: Sequence[Route]) -> tuple[Route, ...]:
+    """``routes`` as executed from ``state.time`` on: every visit after a committed prefix
+    planned then (at t = 0 that changes nothing, and none is written)."""
+    if state.time <= 0:
+        return tuple(routes)
+    return tuple((*route[:state.first_free(n)],
+                  *(v._replace(planned_at=state.time) for v in route[state.first_free(n):]))
+                 for n, route in enumerate(routes))
+
+
+def committed_prefixes(instance: Instance, traces: Sequence[RouteTrace],
+                       t: float) -> tuple[Route, ...]:
     """Every AAV's visits already under way at time ``t`` > 0: visit k is committed when the
-    AAV left visit k-1 by ``t`` (it leaves a node at its arrival tau_{k-1}); visit 0 always,
-    its start being left at time 0."""
+    AAV left the previous node by ``t`` (dep_k <= t; the start is left at time 0 unless the
+    first visit was planned later). A depot visit the AAV has left records the delivery goods
+    it loaded there, Omega of the plan in force, unless an earlier re-plan recorded them."""
     prefixes = []
     for trace in traces:
-        route = trace.route
-        if not route:
-            prefixes.append(())
-            continue
-        length = 1 + sum(1 for tau in trace.arrivals[:-1] if tau <= t)
-        prefixes.append(route[:length])
+        length = sum(1 for dep in trace.departures if dep <= t)
+        prefix = list(trace.route[:length])
+        for k in range(length - 1):  # the last committed visit has not been left yet
+            if instance.is_depot(prefix[k].node) and prefix[k].load is None:
+                prefix[k] = prefix[k]._replace(load=trace.delivery_load[k])
+        prefixes.append(tuple(prefix))
     return tuple(prefixes)
 
 
@@ -94,7 +113,7 @@ def finished_tasks(instance: Instance, traces: Sequence[RouteTrace],
     covered on time by committed visits."""
     covered = [0] * instance.n_tasks
     for trace, prefix in zip(traces, prefixes, strict=True):
-        for (m, amount), arrival in zip(prefix, trace.arrivals, strict=False):
+        for (m, amount, *_), arrival in zip(prefix, trace.arrivals, strict=False):
             if m < instance.n_tasks and instance.tasks[m].on_time(arrival):
                 covered[m] += amount
     return frozenset(m for m, task in enumerate(instance.tasks)
@@ -160,9 +179,14 @@ def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
     for i, t in enumerate([0.0, *release_times(instance)]):
         if plan is not None:
             traces = plan.evaluation.traces
-            prefixes = committed_prefixes(traces, t)
+            prefixes = committed_prefixes(instance, traces, t)
             visible = instance.released_by(t) - finished_tasks(instance, traces, prefixes, t)
-            state = PlanningState(instance, t, visible, prefixes, plan.result.routes)
+            # The plan in force as a warm start: the visits after the prefixes are to be
+            # planned again, so they carry no stamp yet.
+            incumbent = tuple((*prefix, *(v._replace(planned_at=None)
+                                          for v in route[len(prefix):]))
+                              for prefix, route in zip(prefixes, plan.routes, strict=True))
+            state = PlanningState(instance, t, visible, prefixes, incumbent)
         before = None if plan is None else known_cost(plan.evaluation, t)
         # The first call gets the run's seed itself, so a run without events is exactly
         # the static plan call; later calls get independent seeds derived from it, kept below
@@ -185,5 +209,5 @@ def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
             stats=dict(plan.result.stats),
         ))
     assert plan is not None
-    final = evaluator.evaluate(plan.result.routes)
-    return SimulationResult(plan.result.routes, final, tuple(replans), total_wall)
+    final = evaluator.evaluate(plan.routes)
+    return SimulationResult(plan.routes, final, tuple(replans), total_wall)

@@ -63,7 +63,7 @@ def solve(instance: Instance, method: str | MethodSpec | Allocator, *, seed: int
     if mode == "static":
         plan = checked_plan(allocator, PlanningState.static(instance), seed=seed,
                             time_limit=time_limit)
-        routes, evaluation, wall = plan.result.routes, plan.evaluation, plan.wall_time
+        routes, evaluation, wall = plan.routes, plan.evaluation, plan.wall_time
         stats, claimed = dict(plan.result.stats), plan.result.cost
     else:
         run = simulate(instance, allocator, seed=seed, time_limit=time_limit)

@@ -52,7 +52,11 @@ from tsac_bench.planning.insertion import best_insertion, removal_route
 #: of floats, and a "gain" below this is rounding, which could otherwise cycle.
 STRICT_DECREASE = 1e-9
 
-ADD, REMOVE = "add", "remove"
+ADD, REMOVE, PASS_OP = "add", "remove", "pass"
+#: What a selection rule returns to pass its turn (the depot action of M_t U D): the AAV
+#: does nothing this turn. Allowed once per AAV per coalition structure (``can_pass``), so
+#: passes cannot stall the game and "stable" keeps its meaning (docs/methods.md).
+PASS = -1
 
 
 class Anchor(NamedTuple):
@@ -116,6 +120,7 @@ class CoalitionGame:
             self.key ^= k
         self.tabu: set[int] = {self.key}
         self.rejected: list[set[int]] = [set() for _ in range(self.n_aavs)]
+        self.passed: set[int] = set()  # AAVs that passed under the present structure
         self.trajectory: list[float] = [self.plan.cost]
         self.decisions: list[Decision] = []
         self.tabu_hits = 0
@@ -184,6 +189,21 @@ class CoalitionGame:
         proposal = best_insertion(self.plan, n, m, ff, self.residual(n, m))
         return None if proposal is None else Move(ADD, n, m, proposal)
 
+    def can_pass(self, n: int) -> bool:
+        """A pass is allowed unless AAV n already passed under the present structure: a
+        second pass could only repeat the first, and if every AAV kept passing the game
+        would stop (or loop) on a structure nobody has checked for improving moves."""
+        return n not in self.passed
+
+    def pass_turn(self, n: int) -> None:
+        """AAV n does nothing this turn: the structure, the tabu list and the candidate
+        memory stay as they are; the pass is recorded as a decision."""
+        if not self.can_pass(n):
+            raise ValueError(f"AAV {n} already passed under the present structure")
+        self.passed.add(n)
+        self.decisions.append(Decision(len(self.decisions), n, PASS, PASS_OP, False,
+                                       self.trajectory[-1]))
+
     def key_after(self, move: Move) -> int:
         n = move.aav
         return self.key ^ self._aav_keys[n] ^ structure_key(n, move.proposal.trace.route,
@@ -224,6 +244,7 @@ class CoalitionGame:
         self.trajectory.append(self.plan.cost)
         # Forget the rejections whose outcome this move may have changed (module docstring).
         self.rejected[n].clear()
+        self.passed.clear()
         stale = {k for m in changed for k in self.plan.members[m]}
         for k in range(self.n_aavs):
             if k in stale:
@@ -235,7 +256,7 @@ class CoalitionGame:
     def run(self, rule: SelectionRule, rng: np.random.Generator, *, k_max: int, c_max: int,
             deadline: float | None = None) -> str:
         """Play until a stop condition; returns which one: "stable", "k_max", "c_max" or
-        "time-limit"."""
+        "time-limit". A pass counts as a decision (``k_max``) but not as a rejection."""
         consecutive = 0
         while True:
             decided = False
@@ -250,7 +271,11 @@ class CoalitionGame:
                 if not candidates:
                     continue
                 decided = True
-                m = rule.select(DecisionView(self, n, candidates), rng)
+                view = DecisionView(self, n, candidates)
+                m = rule.select(view, rng)
+                if m == PASS and view.can_pass:
+                    self.pass_turn(n)
+                    continue
                 if m not in candidates:
                     raise ValueError(f"{type(rule).__name__} chose task {m}, which is not "
                                      f"a candidate of AAV {n}")
@@ -284,6 +309,11 @@ class DecisionView:
     @property
     def anchor(self) -> Anchor:
         return self.game.anchor(self.aav)
+
+    @property
+    def can_pass(self) -> bool:
+        """Whether ``PASS`` is a valid choice (``CoalitionGame.can_pass``)."""
+        return self.game.can_pass(self.aav)
 
     def is_member(self, m: int) -> bool:
         return self.aav in self.game.plan.members[m]
@@ -337,35 +367,53 @@ class DecisionView:
 
 
 class SelectionRule(Protocol):
-    """Picks the task the deciding AAV acts on, one of ``view.candidates``."""
+    """Picks the task the deciding AAV acts on, one of ``view.candidates``, or ``PASS``
+    when ``view.can_pass``."""
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int: ...
 
 
 # --- the allocators built on the game ---------------------------------------------------
 INITS = ("empty", "incumbent", "greedy")
+#: Defaults shared by every OCF method (hocf, rocf, tsac-ocf), so that their comparisons
+#: start from the same structure with the same budget. ``INIT``: measured in dynamic runs
+#: (docs/methods.md), "empty" gave every method but rocf a lower mean J than "incumbent".
+K_MAX, C_MAX, INIT, SAMPLES = 200_000, 5_000, "empty", 1
+
+
+def sample_rng(seed: int, sample: int) -> np.random.Generator:
+    """The generator of game ``sample`` of a plan call: game 0 uses the call's seed itself
+    (so ``samples=1`` is the plain game), the others independent streams derived from it."""
+    return np.random.default_rng(seed if sample == 0 else [seed, sample])
 
 
 class OCFAllocator(Settings, ABC):
     """Common driver of the OCF methods; subclasses supply the selection rule.
 
-    Settings: ``k_max`` (most decisions per plan call), ``c_max`` (most consecutive
+    Settings: ``k_max`` (most decisions per game), ``c_max`` (most consecutive
     rejections), ``init``, the structure the game starts from: ``"empty"`` (the committed
     prefixes alone: every plan call forms the coalitions afresh), ``"incumbent"`` (the plan
     in force, without what is no longer visible; the committed prefixes alone at t = 0) or
-    ``"greedy"`` (the ``greedy`` method's plan of this planning state)."""
+    ``"greedy"`` (the ``greedy`` method's plan of this planning state); ``samples``, the
+    number of games per plan call (each from the same start with its own random stream,
+    ``sample_rng``): the plan of the game with the lowest J is returned (ties: the earlier
+    game). A time limit is shared by the games; a game is started only before it expires,
+    the first always."""
 
     name: ClassVar[str]
 
-    def __init__(self, k_max: int = 200_000, c_max: int = 5_000,
-                 init: str = "empty") -> None:
+    def __init__(self, k_max: int = K_MAX, c_max: int = C_MAX, init: str = INIT,
+                 samples: int = SAMPLES) -> None:
         if k_max < 0 or c_max < 1:
             raise ValueError("k_max must be >= 0 and c_max >= 1")
         if init not in INITS:
             raise ValueError(f"init must be one of {', '.join(INITS)}, got {init!r}")
+        if samples < 1:
+            raise ValueError("samples must be >= 1")
         self.k_max = k_max
         self.c_max = c_max
         self.init = init
+        self.samples = samples
 
     def initial_routes(self, state: PlanningState) -> tuple[Route, ...]:
         if self.init == "incumbent":
@@ -384,18 +432,32 @@ class OCFAllocator(Settings, ABC):
              time_limit: float | None = None) -> PlanResult:
         began = time.perf_counter()
         deadline = None if time_limit is None else began + time_limit
-        game = CoalitionGame(state, self.initial_routes(state))
-        stop = game.run(self.rule(state), np.random.default_rng(seed), k_max=self.k_max,
-                        c_max=self.c_max, deadline=deadline)
+        start = self.initial_routes(state)
+        best: tuple[CoalitionGame, str] | None = None
+        sample_costs: list[float] = []
+        for sample in range(self.samples):
+            if best is not None and deadline is not None and time.perf_counter() > deadline:
+                break
+            game = CoalitionGame(state, start)
+            stop = game.run(self.rule(state), sample_rng(seed, sample), k_max=self.k_max,
+                            c_max=self.c_max, deadline=deadline)
+            sample_costs.append(game.cost)
+            if best is None or game.cost < best[0].cost:
+                best = (game, stop)
+        assert best is not None
+        game, stop = best
         accepted = len(game.trajectory) - 1
         stats: dict[str, Any] = {
             "stop": stop,
             "decisions": len(game.decisions),
             "accepted": accepted,
-            "rejected": len(game.decisions) - accepted,
+            "rejected": sum(1 for d in game.decisions if d.op != PASS_OP) - accepted,
+            "passes": sum(1 for d in game.decisions if d.op == PASS_OP),
             "tabu_hits": game.tabu_hits,
             "J_initial": game.trajectory[0],
             "trajectory": game.trajectory,
+            "sample_J": sample_costs,
+            "sample": sample_costs.index(game.cost),
             "seconds": time.perf_counter() - began,
         }
         cost = game.cost

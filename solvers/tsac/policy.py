@@ -20,7 +20,15 @@ import torch
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.planning import PlanningState, PlanResult
-from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
+from tsac_bench.solvers.ocf.engine import (
+    C_MAX,
+    INIT,
+    K_MAX,
+    SAMPLES,
+    DecisionView,
+    OCFAllocator,
+    SelectionRule,
+)
 from tsac_bench.solvers.tsac.env import observe
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate
 
@@ -95,8 +103,9 @@ class TSACOCFAllocator(OCFAllocator):
     name = "tsac-ocf"
 
     def __init__(self, policy: str | None = None, temperature: float = 1.0,
-                 k_max: int = 200_000, c_max: int = 5_000, init: str = "incumbent") -> None:
-        super().__init__(k_max=k_max, c_max=c_max, init=init)
+                 k_max: int = K_MAX, c_max: int = C_MAX, init: str = INIT,
+                 samples: int = SAMPLES) -> None:
+        super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples)
         if temperature < 0:
             raise ValueError("temperature must be >= 0")
         self.policy = policy

@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("gymnasium")
 
 from tsac_bench.model.generator import generate  # noqa: E402
-from tsac_bench.planning import PlanningState  # noqa: E402
+from tsac_bench.planning import PlanningState, make_allocator  # noqa: E402
 from tsac_bench.planning.solve import solve  # noqa: E402
 from tsac_bench.solvers.ocf.engine import CoalitionGame, DecisionView  # noqa: E402
 from tsac_bench.solvers.tsac.env import (  # noqa: E402
@@ -219,3 +219,9 @@ def test_zero_temperature_takes_the_most_probable_task():
     greedy = PolicySelection(actor, temperature=0.0).probabilities(view)
     assert greedy.sum() == 1.0 and greedy[int(np.argmax(sampled))] == 1.0
     assert set(np.flatnonzero(sampled)) <= {game.visible.index(m) for m in view.candidates}
+
+
+def test_every_ocf_method_starts_alike_by_default():
+    shared = ("init", "samples", "k_max", "c_max")
+    settings = [make_allocator(m).settings() for m in ("hocf", "rocf", "tsac-ocf")]
+    assert {tuple(s[k] for k in shared) for s in settings} == {("empty", 1, 200_000, 5_000)}

@@ -34,6 +34,7 @@ every other rejected (AAV, task) pair would be rejected again, so it is not re-e
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from abc import ABC, abstractmethod
@@ -124,6 +125,19 @@ class CoalitionGame:
         self.trajectory: list[float] = [self.plan.cost]
         self.decisions: list[Decision] = []
         self.tabu_hits = 0
+
+    def fork(self) -> CoalitionGame:
+        """An independent copy of the game as it stands (structure, tabu list, candidate
+        memory, passes, history): what a look-ahead plays on."""
+        other = copy.copy(self)
+        other.plan = self.evaluator.state(self.plan.routes)
+        other._aav_keys = list(self._aav_keys)
+        other.tabu = set(self.tabu)
+        other.rejected = [set(r) for r in self.rejected]
+        other.passed = set(self.passed)
+        other.trajectory = list(self.trajectory)
+        other.decisions = list(self.decisions)
+        return other
 
     # --- what AAV n sees ---------------------------------------------------------------
     @property
@@ -293,6 +307,15 @@ AGENT_FEATURES = ("x_km", "y_km", "time", "speed", "capacity", "range_left_km", 
 TASK_FEATURES = ("x_km", "y_km", "is_delivery", "demand", "residual", "t_start", "t_end",
                  "release", "coalition_size", "covered", "member", "own_amount",
                  "distance_km", "slack", "candidate")
+#: Columns of ``DecisionView.competition_features`` (one row per visible task): the other
+#: AAVs as the deciding AAV sees them. "Nearest other" is the other AAV whose free route
+#: (anchor included) passes nearest to the task; its spare capacity is its capacity less the
+#: load it carries when it leaves that nearest node (kg); reach is the share of the other
+#: AAVs that could arrive on time and within range from their anchors; a detour cost is the
+#: operating cost (w3 C_op) of flying to the task and back from the nearest node of a free
+#: route, the cheapest over the other AAVs and the deciding AAV's own.
+COMPETITION_FEATURES = ("other_distance_km", "other_spare", "other_reach",
+                        "other_detour_cost", "own_detour_cost")
 #: Columns of ``DecisionView.depot_features``.
 DEPOT_FEATURES = ("x_km", "y_km", "distance_km")
 
@@ -357,6 +380,51 @@ class DecisionView:
                          own.amount if own is not None else 0, distance / 1000,
                          slack / instance.horizon, float(m in candidates)))
         return np.array(rows, dtype=float).reshape(-1, len(TASK_FEATURES))
+
+    def competition_features(self) -> np.ndarray:
+        """One row per visible task (``game.visible`` order), ``COMPETITION_FEATURES``.
+        With no other AAV, the absent competitor is as far as the instance's largest
+        distance, with no spare capacity, out of reach, at the deciding AAV's cost rate."""
+        game, n = self.game, self.aav
+        instance, plan = game.instance, game.plan
+        visible = np.asarray(game.visible, dtype=int)
+        dist = instance.dist
+        # The evaluator's rates (its q_n of Eq. 9 per metre, times w3): the cost rule stays
+        # with its owner.
+        rate = np.array(game.evaluator._op_per_metre) * game.evaluator.w3
+        anchors = [game.anchor(k) for k in range(game.n_aavs)]
+        near = np.empty((game.n_aavs, len(visible)))
+        spare = np.empty((game.n_aavs, len(visible)))
+        for k, anchor in enumerate(anchors):
+            ff, trace = game.first_free[k], plan.traces[k]
+            nodes = [anchor.node, *(v.node for v in trace.route[ff:])]
+            loads = np.array([trace.loads[ff - 1] if ff else 0, *trace.loads[ff:]])
+            legs = dist[np.ix_(nodes, visible)]
+            closest = legs.argmin(axis=0)
+            near[k] = legs[closest, np.arange(len(visible))]
+            spare[k] = instance.aavs[k].capacity - loads[closest]
+        others = np.array([k for k in range(game.n_aavs) if k != n], dtype=int)
+        own_detour = 2.0 * near[n] * rate[n]
+        if len(others) == 0:
+            d_max = float(dist.max())
+            absent = np.full(len(visible), d_max)
+            return np.column_stack([absent / 1000, np.zeros(len(visible)),
+                                    np.zeros(len(visible)), 2.0 * absent * rate[n],
+                                    own_detour]).reshape(-1, len(COMPETITION_FEATURES))
+        near_others = near[others]
+        nearest = others[near_others.argmin(axis=0)]
+        spare_nearest = spare[nearest, np.arange(len(visible))]
+        from_anchor = dist[np.ix_([anchors[k].node for k in others], visible)]
+        times = np.array([anchors[k].time for k in others])[:, None]
+        speeds = np.array([instance.aavs[k].speed for k in others], dtype=float)[:, None]
+        reach_left = np.array([instance.aavs[k].max_range - anchors[k].flown
+                               for k in others])[:, None]
+        latest = np.array([game._latest_on_time[m] for m in visible])
+        reach = ((times + from_anchor / speeds <= latest) & (from_anchor <= reach_left))
+        return np.column_stack([
+            near_others.min(axis=0) / 1000, spare_nearest, reach.mean(axis=0),
+            (2.0 * near_others * rate[others][:, None]).min(axis=0), own_detour,
+        ]).reshape(-1, len(COMPETITION_FEATURES))
 
     def depot_features(self) -> np.ndarray:
         instance = self.game.instance

@@ -20,14 +20,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from tsac_bench.model import Instance
 from tsac_bench.model.generator import ScenarioGenerator, parse_scale
-from tsac_bench.planning import PlanningState
+from tsac_bench.planning import PlanningState, PlanResult
 from tsac_bench.solvers.ocf.engine import (
     AGENT_FEATURES,
     COMPETITION_FEATURES,
@@ -243,7 +242,7 @@ def replan_moments(scales: Sequence[str], method: str = "hocf",
             self.states: list[PlanningState] = []
 
         def plan(self, state: PlanningState, *, seed: int = 0,
-                 time_limit: float | None = None) -> Any:
+                 time_limit: float | None = None) -> PlanResult:
             self.states.append(state)
             return allocator.plan(state, seed=seed, time_limit=time_limit)
 

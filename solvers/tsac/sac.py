@@ -1,8 +1,12 @@
 """Discrete soft actor-critic for the task-selection policy (paper Sec. III-B-2, Eqs. 14-17)
 and the training run behind ``tsac-bench train``.
 
-* Twin critics Q_theta1, Q_theta2 with Polyak-averaged target copies; the critic target is
-  the exact expectation over the next state's valid actions (Eq. 15), not a sample.
+* Twin critics Q_theta1, Q_theta2. Two learning signals (``TrainConfig.signal``):
+  "rollout" (default): the critics regress rollout labels, Q(s, a) = minus the final J
+  after action a and a completion of the game by HOCF with common random AAV orders
+  (``rollout_values``), centred per state: soft policy iteration. "td": Polyak-averaged
+  target copies and the per-decision reward -dJ, the target being the exact expectation
+  over the next state's valid actions (Eq. 15), not a sample.
 * The actor minimises Eq. 16, the expectation over the valid actions of
   alpha log pi - min_j Q_j.
 * The temperature alpha is learned (automatic entropy tuning): the target entropy of a state
@@ -11,7 +15,9 @@ and the training run behind ``tsac-bench train``.
 * The replay buffer keeps states unpadded; a sampled batch is padded to its own longest
   state (L_max of Eq. 17) and every sum over actions runs under the padding and validity
   masks, so padded entries contribute neither value nor gradient.
-* Curriculum: the scales an episode is drawn from change with the share of steps done.
+* Curriculum: the scales an episode is drawn from change with the share of steps done;
+  with the rollout signal, half the episodes are moments of simulated dynamic runs
+  (re-plans with committed prefixes) and the cloning weight is annealed to 0.
 
 Files written to the output folder: ``checkpoint.pt`` (everything needed to resume),
 ``policy.pt`` (the actor alone, the form ``tsac-ocf`` loads), ``curve.json`` and
@@ -491,9 +497,12 @@ class _Run:
 
 
 def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path | None = None,
-          on_step: Callable[[int, dict[str, float]], None] | None = None) -> dict[str, Any]:
+          on_step: Callable[[int, dict[str, float]], None] | None = None,
+          stop_after: float | None = None) -> dict[str, Any]:
     """Train from scratch (or from ``resume``'s checkpoint) up to ``config.steps`` env
-    steps; returns the summary written to ``curve.json``."""
+    steps; returns the summary written to ``curve.json``. ``stop_after`` (seconds of this
+    call; rollout signal) ends the call early at an episode's end, with a checkpoint to
+    resume from and the policy so far."""
     out.mkdir(parents=True, exist_ok=True)
     torch_device = resolve_device(device)
     checkpoint = None
@@ -505,7 +514,7 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
     if config.signal == "td":
         _train_td(run, on_step)
     else:
-        _train_rollout(run, on_step)
+        _train_rollout(run, on_step, stop_after)
     seconds = time.perf_counter() - run.began
     meta = {"steps": run.step, "episode_count": run.episode, "seed": config.seed,
             "seconds": seconds, "device": str(torch_device), "torch": torch.__version__,
@@ -683,14 +692,18 @@ def training_moments(config: TrainConfig, step: int, rng: np.random.Generator
     return sampler(rng)
 
 
-def _train_rollout(run: _Run, on_step: Callable[[int, dict[str, float]], None] | None
-                   ) -> None:
+def _train_rollout(run: _Run, on_step: Callable[[int, dict[str, float]], None] | None,
+                   stop_after: float | None = None) -> None:
     """Soft policy iteration with rollout labels (docs/tsac.md): episodes are OCF games on
     training moments played by ``_Behaviour``; a checkpoint is written at the end of the
     first episode after each ``checkpoint_every`` steps, and a resume starts a new episode."""
     config = run.config
     next_checkpoint = (run.step // config.checkpoint_every + 1) * config.checkpoint_every
+    deadline = None if stop_after is None else time.perf_counter() + stop_after
     while run.step < config.steps:
+        if deadline is not None and time.perf_counter() > deadline:
+            run.save_checkpoint()
+            break
         state = training_moments(config, run.step, run.rng)
         game = CoalitionGame(state, state.base_routes())
         behaviour = _Behaviour(run, state, on_step)

@@ -35,6 +35,7 @@ from tsac_bench.solvers.tsac.env import (  # noqa: E402
     TaskSelectionEnv,
     observe,
     pad,
+    replan_moments,
     unpad,
 )
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate  # noqa: E402
@@ -395,3 +396,21 @@ def test_rollout_training_writes_a_feature_set_2_policy_and_resumes(tmp_path):
     more = train(tmp_path, TrainConfig(steps=70), device="cpu",
                  resume=tmp_path / "checkpoint.pt")
     assert more["steps"] == 70 and more["config"]["net"]["d_model"] == SMALL_V2.d_model
+
+
+def test_replan_moments_are_the_states_of_simulated_dynamic_runs():
+    sample = replan_moments(("6/15",))
+    rng = np.random.default_rng(4)
+    moments = [sample(rng) for _ in range(12)]
+    later = [s for s in moments if s.time > 0]
+    assert later and any(any(p) for s in later for p in s.committed)
+    assert any(s.time == 0 for s in moments)
+    for state in moments:
+        assert state.visible <= state.instance.released_by(state.time)
+        game = CoalitionGame(state, state.base_routes())
+        game.run(PolicySelection(load_policy()), np.random.default_rng(0), k_max=K_MAX,
+                 c_max=C_MAX)
+        assert state.violations(game.plan.routes) == []
+    again = replan_moments(("6/15",))(np.random.default_rng(4))
+    assert (again.instance.name, again.time, again.visible) == (
+        moments[0].instance.name, moments[0].time, moments[0].visible)

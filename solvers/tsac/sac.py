@@ -77,8 +77,13 @@ class SACConfig:
     tau: float = 0.01  # Polyak step of the target critics
     batch_size: int = 64
     buffer_size: int = 20_000
-    target_entropy_ratio: float = 0.3
+    #: The target entropy per state is this share of the uniform policy's. The first policy
+    #: (td, 0.3) never reached 0.3 while cloned, so alpha climbed without end.
+    target_entropy_ratio: float = 0.1
     initial_alpha: float = 0.05
+    #: A faster step for log alpha than for the networks, so that alpha follows the entropy
+    #: target within a few hundred updates instead of drifting for thousands.
+    alpha_lr: float = 3e-3
 
 
 @dataclass(frozen=True)
@@ -197,7 +202,7 @@ class DiscreteSAC:
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=config.lr)
         self.critic_optimizer = torch.optim.Adam(
             [p for q in self.critics for p in q.parameters()], lr=config.lr)
-        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.lr)
+        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.alpha_lr)
 
     @property
     def alpha(self) -> Tensor:
@@ -374,7 +379,9 @@ class TrainConfig:
     label_candidates: int = 8  # rollout: most actions labelled per state (drawn uniformly)
     rollouts: int = 2  # rollout: completions per labelled action (common AAV orders)
     completion: str = "hocf"  # rollout: the OCF method that finishes the game
-    label_scale: float = 10.0  # rollout: J units per unit of Q
+    #: rollout: J units per unit of Q. 1: label differences (0.1-5 J) stand well above
+    #: alpha log pi; at 10 the soft-greedy policy was near-uniform (entropy 1.6-2.0 nats).
+    label_scale: float = 1.0
     updates_per_label: int = 1  # rollout: gradient steps per labelled state
     episode_steps: int = 600  # truncation of one episode (one OCF game)
     eval_every: int = 2_000
@@ -490,9 +497,14 @@ class _Run:
                    self.out / "checkpoint.pt")
 
     def evaluate_now(self, stats: dict[str, float]) -> dict[str, float]:
+        """The curve's gauge; the actor of each gauge point is kept (``policy-STEP.pt``),
+        so that a run's best point can be chosen on the gauge, not on test instances."""
         self.log["evals"].append({"step": self.step, "seconds":
                                   time.perf_counter() - self.began,
                                   **self.evaluate(self.sac.actor)})
+        save_policy(self.sac.actor, self.out / f"policy-{self.step}.pt",
+                    {"steps": self.step, "seed": self.config.seed,
+                     "config": self.config.to_dict(), **self.log["evals"][-1]})
         return {**stats, **self.log["evals"][-1]}
 
 

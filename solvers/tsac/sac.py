@@ -344,10 +344,11 @@ class DiscreteSAC:
 
 # --- the training run --------------------------------------------------------------------
 #: (share of the steps from which the stage applies, the scales episodes are drawn from)
+#: The small scales stay to the end: a short run that dropped 8/20 at 40 % of its steps
+#: ended 22 % above HOCF there while level with it at 16/40 and 32/80.
 DEFAULT_CURRICULUM: tuple[tuple[float, tuple[str, ...]], ...] = (
-    (0.0, ("8/20", "16/40")),
-    (0.3, ("16/40", "32/80")),
-    (0.7, ("32/80",)),
+    (0.0, ("4/10", "8/20", "16/40")),
+    (0.3, ("8/20", "16/40", "32/80")),
 )
 SIGNALS = ("rollout", "td")
 
@@ -754,6 +755,7 @@ def plot_curve(summary: dict[str, Any], path: Path) -> None:
         steps = [u["step"] for u in updates]
         axes[1].semilogy(steps, [u["critic_loss"] for u in updates], label="critic loss")
         axes[1].semilogy(steps, [u["alpha"] for u in updates], label="alpha")
+        axes[1].semilogy(steps, [max(u["entropy"], 1e-4) for u in updates], label="entropy")
         axes[1].legend()
     axes[1].set(title="SAC", xlabel="env step")
     evals = summary["evals"]

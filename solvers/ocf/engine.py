@@ -122,6 +122,7 @@ class CoalitionGame:
         self.tabu: set[int] = {self.key}
         self.rejected: list[set[int]] = [set() for _ in range(self.n_aavs)]
         self.passed: set[int] = set()  # AAVs that passed under the present structure
+        self._proximity: tuple[int, Any] | None = None  # route_proximity's, per structure
         self.trajectory: list[float] = [self.plan.cost]
         self.decisions: list[Decision] = []
         self.tabu_hits = 0
@@ -190,6 +191,31 @@ class CoalitionGame:
     def candidates(self, n: int) -> tuple[int, ...]:
         rejected = self.rejected[n]
         return tuple(m for m in self.valid_tasks(n) if m not in rejected)
+
+    def route_proximity(self) -> tuple[list[Anchor], np.ndarray, np.ndarray]:
+        """Every AAV's anchor and, per (AAV, visible task), the distance from the nearest
+        node of its free route (anchor included) and its spare capacity there (capacity
+        less the load it carries when it leaves that node). It depends on the structure
+        only, which changes exactly when a move is accepted, so it is computed once per
+        accepted move (most decisions are rejections)."""
+        accepted = len(self.trajectory)
+        if self._proximity is not None and self._proximity[0] == accepted:
+            return self._proximity[1]
+        instance, visible = self.instance, np.asarray(self.visible, dtype=int)
+        columns = np.arange(len(visible))
+        anchors = [self.anchor(k) for k in range(self.n_aavs)]
+        near = np.empty((self.n_aavs, len(visible)))
+        spare = np.empty((self.n_aavs, len(visible)))
+        for k, anchor in enumerate(anchors):
+            ff, trace = self.first_free[k], self.plan.traces[k]
+            nodes = [anchor.node, *(v.node for v in trace.route[ff:])]
+            loads = np.array([trace.loads[ff - 1] if ff else 0, *trace.loads[ff:]])
+            legs = instance.dist[np.ix_(nodes, visible)]
+            closest = legs.argmin(axis=0)
+            near[k] = legs[closest, columns]
+            spare[k] = instance.aavs[k].capacity - loads[closest]
+        self._proximity = (accepted, (anchors, near, spare))
+        return anchors, near, spare
 
     # --- moves -------------------------------------------------------------------------
     def move(self, n: int, m: int) -> Move | None:
@@ -386,23 +412,13 @@ class DecisionView:
         With no other AAV, the absent competitor is as far as the instance's largest
         distance, with no spare capacity, out of reach, at the deciding AAV's cost rate."""
         game, n = self.game, self.aav
-        instance, plan = game.instance, game.plan
+        instance = game.instance
         visible = np.asarray(game.visible, dtype=int)
         dist = instance.dist
         # The evaluator's rates (its q_n of Eq. 9 per metre, times w3): the cost rule stays
         # with its owner.
         rate = np.array(game.evaluator._op_per_metre) * game.evaluator.w3
-        anchors = [game.anchor(k) for k in range(game.n_aavs)]
-        near = np.empty((game.n_aavs, len(visible)))
-        spare = np.empty((game.n_aavs, len(visible)))
-        for k, anchor in enumerate(anchors):
-            ff, trace = game.first_free[k], plan.traces[k]
-            nodes = [anchor.node, *(v.node for v in trace.route[ff:])]
-            loads = np.array([trace.loads[ff - 1] if ff else 0, *trace.loads[ff:]])
-            legs = dist[np.ix_(nodes, visible)]
-            closest = legs.argmin(axis=0)
-            near[k] = legs[closest, np.arange(len(visible))]
-            spare[k] = instance.aavs[k].capacity - loads[closest]
+        anchors, near, spare = game.route_proximity()
         others = np.array([k for k in range(game.n_aavs) if k != n], dtype=int)
         own_detour = 2.0 * near[n] * rate[n]
         if len(others) == 0:

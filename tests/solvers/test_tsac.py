@@ -286,6 +286,16 @@ def test_feature_set_2_adds_scaled_competition_columns_and_leads_with_the_pass()
     np.testing.assert_array_equal(new.pass_token, new.depots[nearest_depot])
     game.pass_turn(view.aav)
     assert not observe(view, V2).action_mask[0]  # a second pass under this structure
+    # The per-structure cache: after more accepted moves the columns are those of a game
+    # built afresh on the same routes.
+    game.run(HeuristicSelection(game.instance, 1.0, 2.0, 1.0), np.random.default_rng(1),
+             k_max=len(game.decisions) + 20, c_max=C_MAX)
+    assert len(game.trajectory) > 1
+    n = next(n for n in range(game.n_aavs) if game.candidates(n))
+    fresh = CoalitionGame(game.state, game.plan.routes)
+    np.testing.assert_array_equal(
+        DecisionView(game, n, game.candidates(n)).competition_features(),
+        DecisionView(fresh, n, game.candidates(n)).competition_features())
 
 
 def test_padding_never_changes_the_real_tokens_with_competition_and_pass():

@@ -398,7 +398,7 @@ def test_rollout_training_writes_a_feature_set_2_policy_and_resumes(tmp_path):
     first = train(tmp_path, config, device="cpu")
     assert first["steps"] == 50 and first["labels"] and first["updates"]
     assert load_policy(tmp_path / "policy.pt").config.features == 2
-    assert config.clone_weight_at(20) == 2.0 and config.clone_weight_at(25) == 0.0
+    assert [config.clone_weight_at(s) for s in (20, 35, 50)] == [2.0, 1.0, 0.0]
     # A call that runs out of its time stops at an episode's end with a checkpoint.
     paused = train(tmp_path, TrainConfig(steps=70), device="cpu",
                    resume=tmp_path / "checkpoint.pt", stop_after=1e-9)

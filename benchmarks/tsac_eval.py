@@ -2,11 +2,16 @@
 
 Mean and median J (the evaluator's, of the executed routes) per scale and method, the
 reduction of TSAC-OCF's mean J against HOCF's (the paper: 39.76 % at 32/80), and per-instance
-wins. Sampling-temperature ablations of TSAC-OCF are extra rows. Run by hand:
+wins. Every row states its start (``init``) and games per plan call (``samples``): the OCF
+methods share their defaults (``solvers/ocf/engine.py``), so a comparison is on equal footing
+unless a row says otherwise. Extra rows: other policy files (``--ablation``), the
+"incumbent" start (``--incumbent-rows``), sampling temperatures (``--temperatures``). Run by
+hand:
     python benchmarks/tsac_eval.py [--instances 10] [--first-seed 900000] [--policy FILE]
-Writes reports/tsac-eval.md. Held-out instances: generator seeds first-seed .. first-seed +
-instances - 1 (training draws its instance seeds from a generator seeded by the training
-seed; a collision with this range is a 1-in-10^5 event per instance). Method seed 0.
+Writes reports/tsac-eval.md (or ``--out``). Held-out instances: generator seeds
+first-seed .. first-seed + instances - 1 (training draws its instance seeds from a generator
+seeded by the training seed; a collision with this range is a 1-in-10^5 event per instance).
+Method seed 0.
 """
 
 from __future__ import annotations
@@ -20,24 +25,32 @@ import time
 from pathlib import Path
 
 from tsac_bench.model.generator import generate
+from tsac_bench.planning import make_allocator
 from tsac_bench.planning.solve import solve
 
 SCALES = ("16/40", "32/80")
 
 
-def variants(policy: str | None, ablations: list[str]) -> list[tuple[str, str, dict]]:
+def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
+             temperatures: bool) -> list[tuple[str, str, dict]]:
     tsac = {"policy": policy} if policy else {}
-    rows = [
-        ("hocf", "hocf", {}),
-        ("rocf", "rocf", {}),
-        ("tsac-ocf", "tsac-ocf", tsac),
-        ("tsac-ocf T=0.5", "tsac-ocf", {**tsac, "temperature": 0.5}),
-        ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**tsac, "temperature": 0.0}),
-    ]
+    rows = [("hocf", "hocf", {}), ("rocf", "rocf", {}), ("tsac-ocf", "tsac-ocf", tsac)]
+    if temperatures:
+        rows += [("tsac-ocf T=0.5", "tsac-ocf", {**tsac, "temperature": 0.5}),
+                 ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**tsac, "temperature": 0.0})]
     for item in ablations:
         label, _, path = item.partition("=")
         rows.append((label, "tsac-ocf", {"policy": path}))
+    if incumbent:
+        rows += [("hocf init=incumbent", "hocf", {"init": "incumbent"}),
+                 ("tsac-ocf init=incumbent", "tsac-ocf", {**tsac, "init": "incumbent"})]
     return rows
+
+
+def footing(method: str, settings: dict) -> str:
+    """The row's start and games per plan call, as the method will run them."""
+    resolved = make_allocator(method, **settings).settings()
+    return f"{resolved['init']}, {resolved['samples']}"
 
 
 def main() -> None:
@@ -48,6 +61,10 @@ def main() -> None:
     parser.add_argument("--scales", nargs="+", default=list(SCALES))
     parser.add_argument("--ablation", action="append", default=[], metavar="LABEL=FILE",
                         help="an extra tsac-ocf row with another policy file")
+    parser.add_argument("--incumbent-rows", action="store_true",
+                        help="add hocf and tsac-ocf rows started from the incumbent plan")
+    parser.add_argument("--temperatures", action="store_true",
+                        help="add tsac-ocf rows sampled at T = 0.5 and T = 0")
     parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
@@ -56,7 +73,9 @@ def main() -> None:
     command = (f"python benchmarks/tsac_eval.py --instances {args.instances} --first-seed "
                f"{args.first_seed}" + (f" --policy {args.policy}" if args.policy else "")
                + f" --scales {' '.join(args.scales)}"
-               + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation))
+               + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation)
+               + (" --incumbent-rows" if args.incumbent_rows else "")
+               + (" --temperatures" if args.temperatures else ""))
     lines = [
         "# TSAC-OCF against HOCF and ROCF (dynamic mode, held-out instances)",
         "",
@@ -65,33 +84,45 @@ def main() -> None:
         f"{platform.python_version()}, pinned to one core (shared with other work: wall "
         f"times are indicative only). Generated instances (default generator), seeds "
         f"{seeds.start}..{seeds.stop - 1}; method seed 0; dynamic mode (plan at t = 0, "
-        "re-plan at each release event); J is the evaluator's J of the executed routes.",
+        "re-plan at each release event); J is the evaluator's J of the executed routes. "
+        "Budget of every plan call, every method: no time limit, k_max 200000 decisions, "
+        "c_max 5000 consecutive rejections; `start, games` is the "
+        "structure each plan call starts from (`init`) and the games it plays (`samples`).",
         "",
-        "| scale | method | mean J | median J | mean wall (s) | vs HOCF (mean J) | "
-        "instances below HOCF |",
-        "|---|---|---:|---:|---:|---:|---:|",
+        "| scale | method | start, games | mean J | median J | mean wall (s) | "
+        "vs HOCF (mean J) | instances below HOCF |",
+        "|---|---|---|---:|---:|---:|---:|---:|",
     ]
+    unstable = 0
     for scale in args.scales:
         instances = [generate(scale, seed) for seed in seeds]
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
-        for label, method, settings in variants(args.policy, args.ablation):
+        rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,
+                        temperatures=args.temperatures)
+        starts = {label: footing(method, settings) for label, method, settings in rows}
+        for label, method, settings in rows:
             for instance in instances:
                 began = time.perf_counter()
                 outcome = solve(instance, method, seed=0, mode="dynamic", settings=settings)
                 walls.setdefault(label, []).append(time.perf_counter() - began)
                 costs.setdefault(label, []).append(outcome.cost)
+                unstable += sum(r["stats"].get("stop") != "stable"
+                                for r in outcome.stats["replans"])
             print(f"{scale} {label}: mean J {statistics.fmean(costs[label]):.2f}", flush=True)
         hocf = costs["hocf"]
         for label, values in costs.items():
             mean = statistics.fmean(values)
             reduction = (statistics.fmean(hocf) - mean) / statistics.fmean(hocf)
             below = sum(v < h for v, h in zip(values, hocf, strict=True))
-            lines.append(f"| {scale} | {label} | {mean:.2f} | {statistics.median(values):.2f} "
+            lines.append(f"| {scale} | {label} | {starts[label]} | {mean:.2f} | "
+                         f"{statistics.median(values):.2f} "
                          f"| {statistics.fmean(walls[label]):.2f} | {100 * reduction:+.1f} % "
                          f"| {below}/{len(values)} |")
     lines += ["", "`vs HOCF` is (mean J(HOCF) - mean J(method)) / mean J(HOCF): positive means "
-              "lower cost than HOCF (the paper reports +39.76 % for TSAC-OCF at 32/80).", ""]
+              "lower cost than HOCF (the paper reports +39.76 % for TSAC-OCF at 32/80).",
+              f"Plan calls that stopped on a budget rather than a stable structure: {unstable}.",
+              ""]
     args.out.write_text("\n".join(lines))
     print("\n".join(lines))
 

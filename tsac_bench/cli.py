@@ -382,6 +382,9 @@ def train(
     resume: Annotated[Path | None, typer.Option(help="a checkpoint.pt to continue from")]
     = None,
     threads: Annotated[int, typer.Option(min=1, help="torch CPU threads")] = 1,
+    stop_after: Annotated[float | None, typer.Option(
+        min=1, help="seconds: end this call at the next episode's end, with a checkpoint to "
+        "--resume from")] = None,
 ) -> None:
     """Train the TSAC-OCF task-selection policy (discrete SAC, docs/tsac.md)."""
     if device not in ("auto", "cpu", "cuda"):
@@ -420,7 +423,8 @@ def train(
                                                              "eval_ratio_hocf") if k in stats)
             progress.update(bar, completed=step, info=info)
 
-        summary = run_training(out, config, device=device, resume=resume, on_step=on_step)
+        summary = run_training(out, config, device=device, resume=resume, on_step=on_step,
+                               stop_after=stop_after)
     console.print(f"trained {summary['steps']} steps ({summary['episode_count']} episodes) in "
                   f"{summary['seconds']:.0f} s on {summary['device']}; policy: "
                   f"{out / 'policy.pt'}")

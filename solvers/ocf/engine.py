@@ -34,6 +34,7 @@ every other rejected (AAV, task) pair would be rejected again, so it is not re-e
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from abc import ABC, abstractmethod
@@ -60,7 +61,11 @@ from tsac_bench.planning.insertion import best_insertion, removal_route
 #: of floats, and a "gain" below this is rounding, which could otherwise cycle.
 STRICT_DECREASE = 1e-9
 
-ADD, REMOVE = "add", "remove"
+ADD, REMOVE, PASS_OP = "add", "remove", "pass"
+#: What a selection rule returns to pass its turn (the depot action of M_t U D): the AAV
+#: does nothing this turn. Allowed once per AAV per coalition structure (``can_pass``), so
+#: passes cannot stall the game and "stable" keeps its meaning (docs/methods.md).
+PASS = -1
 
 
 class Move(NamedTuple):
@@ -116,9 +121,24 @@ class CoalitionGame:
             self.key ^= k
         self.tabu: set[int] = {self.key}
         self.rejected: list[set[int]] = [set() for _ in range(self.n_aavs)]
+        self.passed: set[int] = set()  # AAVs that passed under the present structure
+        self._proximity: tuple[int, Any] | None = None  # route_proximity's, per structure
         self.trajectory: list[float] = [self.plan.cost]
         self.decisions: list[Decision] = []
         self.tabu_hits = 0
+
+    def fork(self) -> CoalitionGame:
+        """An independent copy of the game as it stands (structure, tabu list, candidate
+        memory, passes, history): what a look-ahead plays on."""
+        other = copy.copy(self)
+        other.plan = self.evaluator.state(self.plan.routes)
+        other._aav_keys = list(self._aav_keys)
+        other.tabu = set(self.tabu)
+        other.rejected = [set(r) for r in self.rejected]
+        other.passed = set(self.passed)
+        other.trajectory = list(self.trajectory)
+        other.decisions = list(self.decisions)
+        return other
 
     # --- what AAV n sees ---------------------------------------------------------------
     @property
@@ -168,6 +188,31 @@ class CoalitionGame:
         rejected = self.rejected[n]
         return tuple(m for m in self.valid_tasks(n) if m not in rejected)
 
+    def route_proximity(self) -> tuple[list[Anchor], np.ndarray, np.ndarray]:
+        """Every AAV's anchor and, per (AAV, visible task), the distance from the nearest
+        node of its free route (anchor included) and its spare capacity there (capacity
+        less the load it carries when it leaves that node). It depends on the structure
+        only, which changes exactly when a move is accepted, so it is computed once per
+        accepted move (most decisions are rejections)."""
+        accepted = len(self.trajectory)
+        if self._proximity is not None and self._proximity[0] == accepted:
+            return self._proximity[1]
+        instance, visible = self.instance, np.asarray(self.visible, dtype=int)
+        columns = np.arange(len(visible))
+        anchors = [self.anchor(k) for k in range(self.n_aavs)]
+        near = np.empty((self.n_aavs, len(visible)))
+        spare = np.empty((self.n_aavs, len(visible)))
+        for k, anchor in enumerate(anchors):
+            ff, trace = self.first_free[k], self.plan.traces[k]
+            nodes = [anchor.node, *(v.node for v in trace.route[ff:])]
+            loads = np.array([trace.loads[ff - 1] if ff else 0, *trace.loads[ff:]])
+            legs = instance.dist[np.ix_(nodes, visible)]
+            closest = legs.argmin(axis=0)
+            near[k] = legs[closest, columns]
+            spare[k] = instance.aavs[k].capacity - loads[closest]
+        self._proximity = (accepted, (anchors, near, spare))
+        return anchors, near, spare
+
     # --- moves -------------------------------------------------------------------------
     def move(self, n: int, m: int) -> Move | None:
         """AAV n's move on task m: REMOVE if m is in its route, ADD otherwise; None when no
@@ -179,6 +224,21 @@ class CoalitionGame:
             return None if proposal is None else Move(REMOVE, n, m, proposal)
         proposal = best_insertion(self.plan, n, m, ff, self.residual(n, m))
         return None if proposal is None else Move(ADD, n, m, proposal)
+
+    def can_pass(self, n: int) -> bool:
+        """A pass is allowed unless AAV n already passed under the present structure: a
+        second pass could only repeat the first, and if every AAV kept passing the game
+        would stop (or loop) on a structure nobody has checked for improving moves."""
+        return n not in self.passed
+
+    def pass_turn(self, n: int) -> None:
+        """AAV n does nothing this turn: the structure, the tabu list and the candidate
+        memory stay as they are; the pass is recorded as a decision."""
+        if not self.can_pass(n):
+            raise ValueError(f"AAV {n} already passed under the present structure")
+        self.passed.add(n)
+        self.decisions.append(Decision(len(self.decisions), n, PASS, PASS_OP, False,
+                                       self.trajectory[-1]))
 
     def key_after(self, move: Move) -> int:
         n = move.aav
@@ -220,6 +280,7 @@ class CoalitionGame:
         self.trajectory.append(self.plan.cost)
         # Forget the rejections whose outcome this move may have changed (module docstring).
         self.rejected[n].clear()
+        self.passed.clear()
         stale = {k for m in changed for k in self.plan.members[m]}
         for k in range(self.n_aavs):
             if k in stale:
@@ -231,7 +292,7 @@ class CoalitionGame:
     def run(self, rule: SelectionRule, rng: np.random.Generator, *, k_max: int, c_max: int,
             deadline: float | None = None) -> str:
         """Play until a stop condition; returns which one: "stable", "k_max", "c_max" or
-        "time-limit"."""
+        "time-limit". A pass counts as a decision (``k_max``) but not as a rejection."""
         consecutive = 0
         while True:
             decided = False
@@ -246,7 +307,11 @@ class CoalitionGame:
                 if not candidates:
                     continue
                 decided = True
-                m = rule.select(DecisionView(self, n, candidates), rng)
+                view = DecisionView(self, n, candidates)
+                m = rule.select(view, rng)
+                if m == PASS and view.can_pass:
+                    self.pass_turn(n)
+                    continue
                 if m not in candidates:
                     raise ValueError(f"{type(rule).__name__} chose task {m}, which is not "
                                      f"a candidate of AAV {n}")
@@ -264,6 +329,15 @@ AGENT_FEATURES = ("x_km", "y_km", "time", "speed", "capacity", "range_left_km", 
 TASK_FEATURES = ("x_km", "y_km", "is_delivery", "demand", "residual", "t_start", "t_end",
                  "release", "coalition_size", "covered", "member", "own_amount",
                  "distance_km", "slack", "candidate")
+#: Columns of ``DecisionView.competition_features`` (one row per visible task): the other
+#: AAVs as the deciding AAV sees them. "Nearest other" is the other AAV whose free route
+#: (anchor included) passes nearest to the task; its spare capacity is its capacity less the
+#: load it carries when it leaves that nearest node (kg); reach is the share of the other
+#: AAVs that could arrive on time and within range from their anchors; a detour cost is the
+#: operating cost (w3 C_op) of flying to the task and back from the nearest node of a free
+#: route, the cheapest over the other AAVs and the deciding AAV's own.
+COMPETITION_FEATURES = ("other_distance_km", "other_spare", "other_reach",
+                        "other_detour_cost", "own_detour_cost")
 #: Columns of ``DecisionView.depot_features``.
 DEPOT_FEATURES = ("x_km", "y_km", "distance_km")
 
@@ -280,6 +354,11 @@ class DecisionView:
     @property
     def anchor(self) -> Anchor:
         return self.game.anchor(self.aav)
+
+    @property
+    def can_pass(self) -> bool:
+        """Whether ``PASS`` is a valid choice (``CoalitionGame.can_pass``)."""
+        return self.game.can_pass(self.aav)
 
     def is_member(self, m: int) -> bool:
         return self.aav in self.game.plan.members[m]
@@ -324,6 +403,41 @@ class DecisionView:
                          slack / instance.horizon, float(m in candidates)))
         return np.array(rows, dtype=float).reshape(-1, len(TASK_FEATURES))
 
+    def competition_features(self) -> np.ndarray:
+        """One row per visible task (``game.visible`` order), ``COMPETITION_FEATURES``.
+        With no other AAV, the absent competitor is as far as the instance's largest
+        distance, with no spare capacity, out of reach, at the deciding AAV's cost rate."""
+        game, n = self.game, self.aav
+        instance = game.instance
+        visible = np.asarray(game.visible, dtype=int)
+        dist = instance.dist
+        # The evaluator's rates (its q_n of Eq. 9 per metre, times w3): the cost rule stays
+        # with its owner.
+        rate = np.array(game.evaluator._op_per_metre) * game.evaluator.w3
+        anchors, near, spare = game.route_proximity()
+        others = np.array([k for k in range(game.n_aavs) if k != n], dtype=int)
+        own_detour = 2.0 * near[n] * rate[n]
+        if len(others) == 0:
+            d_max = float(dist.max())
+            absent = np.full(len(visible), d_max)
+            return np.column_stack([absent / 1000, np.zeros(len(visible)),
+                                    np.zeros(len(visible)), 2.0 * absent * rate[n],
+                                    own_detour]).reshape(-1, len(COMPETITION_FEATURES))
+        near_others = near[others]
+        nearest = others[near_others.argmin(axis=0)]
+        spare_nearest = spare[nearest, np.arange(len(visible))]
+        from_anchor = dist[np.ix_([anchors[k].node for k in others], visible)]
+        times = np.array([anchors[k].time for k in others])[:, None]
+        speeds = np.array([instance.aavs[k].speed for k in others], dtype=float)[:, None]
+        reach_left = np.array([instance.aavs[k].max_range - anchors[k].flown
+                               for k in others])[:, None]
+        latest = np.array([game._latest_on_time[m] for m in visible])
+        reach = ((times + from_anchor / speeds <= latest) & (from_anchor <= reach_left))
+        return np.column_stack([
+            near_others.min(axis=0) / 1000, spare_nearest, reach.mean(axis=0),
+            (2.0 * near_others * rate[others][:, None]).min(axis=0), own_detour,
+        ]).reshape(-1, len(COMPETITION_FEATURES))
+
     def depot_features(self) -> np.ndarray:
         instance = self.game.instance
         row = self.game._dist[self.anchor.node]
@@ -333,33 +447,49 @@ class DecisionView:
 
 
 class SelectionRule(Protocol):
-    """Picks the task the deciding AAV acts on, one of ``view.candidates``."""
+    """Picks the task the deciding AAV acts on, one of ``view.candidates``, or ``PASS``
+    when ``view.can_pass``."""
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int: ...
 
 
 # --- the allocators built on the game ---------------------------------------------------
 INITS = ("empty", "incumbent", "greedy")
+#: Defaults shared by every OCF method (hocf, rocf, tsac-ocf), so that their comparisons
+#: start from the same structure with the same budget. ``INIT``: measured in dynamic runs
+#: (docs/methods.md), "empty" gave every method but rocf a lower mean J than "incumbent".
+K_MAX, C_MAX, INIT, SAMPLES = 200_000, 5_000, "empty", 1
+
+
+def sample_rng(seed: int, sample: int) -> np.random.Generator:
+    """The generator of game ``sample`` of a plan call: game 0 uses the call's seed itself
+    (so ``samples=1`` is the plain game), the others independent streams derived from it."""
+    return np.random.default_rng(seed if sample == 0 else [seed, sample])
 
 
 class OCFAllocator(Settings, ABC):
     """Common driver of the OCF methods; subclasses supply the selection rule.
 
-    Settings: ``k_max`` (most decisions per plan call), ``c_max`` (most consecutive
+    Settings: ``k_max`` (most decisions per game), ``c_max`` (most consecutive
     rejections), ``init``, the structure the game starts from: ``"empty"`` (the committed
     prefixes alone: every plan call forms the coalitions afresh), ``"incumbent"`` (the plan
     in force, without what is no longer visible; the committed prefixes alone at t = 0) or
-    ``"greedy"`` (the ``greedy`` method's plan of this planning state)."""
+    ``"greedy"`` (the ``greedy`` method's plan of this planning state); ``samples``, the
+    number of games per plan call (each from the same start with its own random stream,
+    ``sample_rng``): the plan of the game with the lowest J is returned (ties: the earlier
+    game). A time limit is shared by the games; a game is started only before it expires,
+    the first always."""
 
     name: ClassVar[str]
     setting_constraints = declare(k_max=Interval(int, 0, None), c_max=Interval(int, 1, None),
-                                  init=Options(*INITS))
+                                  init=Options(*INITS), samples=Interval(int, 1, None))
 
-    def __init__(self, k_max: int = 200_000, c_max: int = 5_000,
-                 init: str = "empty") -> None:
+    def __init__(self, k_max: int = K_MAX, c_max: int = C_MAX, init: str = INIT,
+                 samples: int = SAMPLES) -> None:
         self.k_max = k_max
         self.c_max = c_max
         self.init = init
+        self.samples = samples
 
     def initial_routes(self, state: PlanningState) -> tuple[Route, ...]:
         if self.init == "incumbent":
@@ -378,18 +508,32 @@ class OCFAllocator(Settings, ABC):
              time_limit: float | None = None) -> PlanResult:
         began = time.perf_counter()
         deadline = None if time_limit is None else began + time_limit
-        game = CoalitionGame(state, self.initial_routes(state))
-        stop = game.run(self.rule(state), np.random.default_rng(seed), k_max=self.k_max,
-                        c_max=self.c_max, deadline=deadline)
+        start = self.initial_routes(state)
+        best: tuple[CoalitionGame, str] | None = None
+        sample_costs: list[float] = []
+        for sample in range(self.samples):
+            if best is not None and deadline is not None and time.perf_counter() > deadline:
+                break
+            game = CoalitionGame(state, start)
+            stop = game.run(self.rule(state), sample_rng(seed, sample), k_max=self.k_max,
+                            c_max=self.c_max, deadline=deadline)
+            sample_costs.append(game.cost)
+            if best is None or game.cost < best[0].cost:
+                best = (game, stop)
+        assert best is not None
+        game, stop = best
         accepted = len(game.trajectory) - 1
         stats: dict[str, Any] = {
             "stop": stop,
             "decisions": len(game.decisions),
             "accepted": accepted,
-            "rejected": len(game.decisions) - accepted,
+            "rejected": sum(1 for d in game.decisions if d.op != PASS_OP) - accepted,
+            "passes": sum(1 for d in game.decisions if d.op == PASS_OP),
             "tabu_hits": game.tabu_hits,
             "J_initial": game.trajectory[0],
             "trajectory": game.trajectory,
+            "sample_J": sample_costs,
+            "sample": sample_costs.index(game.cost),
             "seconds": time.perf_counter() - began,
         }
         cost = game.cost

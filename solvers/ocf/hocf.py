@@ -26,7 +26,15 @@ import numpy as np
 
 from tsac_bench.model import Instance
 from tsac_bench.planning import Interval, PlanningState, declare
-from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
+from tsac_bench.solvers.ocf.engine import (
+    C_MAX,
+    INIT,
+    K_MAX,
+    SAMPLES,
+    DecisionView,
+    OCFAllocator,
+    SelectionRule,
+)
 
 
 class HeuristicSelection:
@@ -74,9 +82,9 @@ class HOCFAllocator(OCFAllocator):
                                      for w in ("w_urgency", "w_distance", "w_residual")})
 
     def __init__(self, w_urgency: float = 1.0, w_distance: float = 2.0,
-                 w_residual: float = 1.0, k_max: int = 200_000, c_max: int = 5_000,
-                 init: str = "empty") -> None:
-        super().__init__(k_max=k_max, c_max=c_max, init=init)
+                 w_residual: float = 1.0, k_max: int = K_MAX, c_max: int = C_MAX,
+                 init: str = INIT, samples: int = SAMPLES) -> None:
+        super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples)
         self.w_urgency = w_urgency
         self.w_distance = w_distance
         self.w_residual = w_residual

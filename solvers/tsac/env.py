@@ -26,10 +26,12 @@ import numpy as np
 
 from tsac_bench.model import Instance
 from tsac_bench.model.generator import ScenarioGenerator, parse_scale
-from tsac_bench.planning import PlanningState
+from tsac_bench.planning import PlanningState, PlanResult
 from tsac_bench.solvers.ocf.engine import (
     AGENT_FEATURES,
+    COMPETITION_FEATURES,
     DEPOT_FEATURES,
+    PASS,
     TASK_FEATURES,
     CoalitionGame,
     DecisionView,
@@ -48,6 +50,12 @@ TASK_SCALE: Mapping[str, float] = {
     "member": 1.0, "own_amount": 30.0, "distance_km": 10.0, "slack": 1.0, "candidate": 1.0,
 }
 DEPOT_SCALE: Mapping[str, float] = {"x_km": 10.0, "y_km": 10.0, "distance_km": 10.0}
+#: Detour costs are w3 C_op in J's units: a 2 km round trip of the paper's AAV types costs
+#: 0.01-0.03, so 0.05 brings them to O(1).
+COMPETITION_SCALE: Mapping[str, float] = {
+    "other_distance_km": 10.0, "other_spare": 30.0, "other_reach": 1.0,
+    "other_detour_cost": 0.05, "own_detour_cost": 0.05,
+}
 #: Derived task columns appended after the engine's: the task's position relative to the
 #: deciding AAV's anchor (km / 10); the share of the task's demand the AAV could still cover
 #: alone, min(residual, capacity) / demand; the distance from the nearest node of the AAV's
@@ -66,22 +74,58 @@ def _scales(names: Sequence[str], table: Mapping[str, float]) -> np.ndarray:
 _AGENT_DIVISOR = _scales(AGENT_FEATURES, AGENT_SCALE)
 _TASK_DIVISOR = _scales(TASK_FEATURES, TASK_SCALE)
 _DEPOT_DIVISOR = _scales(DEPOT_FEATURES, DEPOT_SCALE)
+_COMPETITION_DIVISOR = _scales(COMPETITION_FEATURES, COMPETITION_SCALE)
 AGENT_DIM = len(AGENT_FEATURES)
 TASK_DIM = len(TASK_FEATURES) + len(EXTRA_TASK_FEATURES)
 DEPOT_DIM = len(DEPOT_FEATURES)
 
 
 @dataclass(frozen=True)
+class FeatureSet:
+    """A versioned state and action space; a policy file names the version it was trained
+    on. 1: the task rows of ``TASK_FEATURES`` + ``EXTRA_TASK_FEATURES``, actions = the
+    tasks. 2: the task rows also carry ``COMPETITION_FEATURES``, and the pass token leads
+    the actions (action 0 = ``PASS``, action i = task row i - 1)."""
+
+    version: int
+    competition: bool
+    pass_action: bool
+
+    @property
+    def task_dim(self) -> int:
+        return TASK_DIM + (len(COMPETITION_FEATURES) if self.competition else 0)
+
+    @property
+    def offset(self) -> int:
+        """Index of the first task among the actions."""
+        return int(self.pass_action)
+
+
+FEATURE_SETS: Mapping[int, FeatureSet] = {1: FeatureSet(1, False, False),
+                                          2: FeatureSet(2, True, True)}
+
+
+@dataclass(frozen=True)
 class Observation:
-    """Eq. 20's state, unpadded: rows of ``tasks`` follow ``game.visible``."""
+    """Eq. 20's state, unpadded: rows of ``tasks`` follow ``game.visible``. With a pass
+    token (feature set 2) ``pass_token`` is the depot row nearest to the anchor (where
+    "doing nothing" leaves the AAV) and ``action_mask[0]`` says whether it may pass."""
 
     agent: np.ndarray  # (AGENT_DIM,)
-    tasks: np.ndarray  # (M_t, TASK_DIM)
+    tasks: np.ndarray  # (M_t, task_dim)
     depots: np.ndarray  # (K, DEPOT_DIM)
-    action_mask: np.ndarray  # (M_t,) bool: the deciding AAV's candidates
+    action_mask: np.ndarray  # (offset + M_t,) bool: pass (if any), then the candidates
+    pass_token: np.ndarray | None = None  # (DEPOT_DIM,)
 
 
-def observe(view: DecisionView) -> Observation:
+def action_choice(view: DecisionView, action: int, features: FeatureSet) -> int:
+    """The engine's choice (a task or ``PASS``) of an action index."""
+    if features.pass_action and action == 0:
+        return PASS
+    return view.game.visible[action - features.offset]
+
+
+def observe(view: DecisionView, features: FeatureSet = FEATURE_SETS[1]) -> Observation:
     """The deciding AAV's state, scaled, with its validity mask."""
     game, n = view.game, view.aav
     agent_raw = view.agent_features()
@@ -101,13 +145,20 @@ def observe(view: DecisionView) -> Observation:
     t_end = [game.instance.tasks[m].latest_on_time for m in game.visible]
     own_late = np.array([n in own[m] and own[m][n].arrival > t_end[i]
                          for i, m in enumerate(game.visible)], dtype=float)
-    tasks = np.concatenate([tasks, relative, coverable[:, None], route_distance[:, None],
-                            own_late[:, None]], axis=1).astype(np.float32)
+    columns = [tasks, relative, coverable[:, None], route_distance[:, None], own_late[:, None]]
+    if features.competition:
+        columns.append(view.competition_features() / _COMPETITION_DIVISOR)
+    tasks = np.concatenate(columns, axis=1).astype(np.float32)
     depots = (view.depot_features() / _DEPOT_DIVISOR).astype(np.float32)
-    index = {m: i for i, m in enumerate(game.visible)}
-    action_mask = np.zeros(len(game.visible), dtype=bool)
+    index = {m: i + features.offset for i, m in enumerate(game.visible)}
+    action_mask = np.zeros(features.offset + len(game.visible), dtype=bool)
     action_mask[[index[m] for m in view.candidates]] = True
-    return Observation(agent, tasks, depots, action_mask)
+    pass_token = None
+    if features.pass_action:
+        # Passing is offered only with a candidate to pass over (a terminal state has none).
+        action_mask[0] = bool(view.candidates) and view.can_pass
+        pass_token = depots[int(np.argmin(depots[:, DEPOT_FEATURES.index("distance_km")]))]
+    return Observation(agent, tasks, depots, action_mask, pass_token)
 
 
 def pad(observation: Observation, max_tasks: int, max_depots: int) -> dict[str, np.ndarray]:
@@ -117,7 +168,8 @@ def pad(observation: Observation, max_tasks: int, max_depots: int) -> dict[str, 
     if m > max_tasks or k > max_depots:
         raise ValueError(f"a state with {m} tasks and {k} depots does not fit the "
                          f"observation space ({max_tasks} tasks, {max_depots} depots)")
-    tasks = np.zeros((max_tasks, TASK_DIM), dtype=np.float32)
+    offset = int(observation.pass_token is not None)
+    tasks = np.zeros((max_tasks, observation.tasks.shape[1]), dtype=np.float32)
     tasks[:m] = observation.tasks
     depots = np.zeros((max_depots, DEPOT_DIM), dtype=np.float32)
     depots[:k] = observation.depots
@@ -125,19 +177,25 @@ def pad(observation: Observation, max_tasks: int, max_depots: int) -> dict[str, 
     task_mask[:m] = 1
     depot_mask = np.zeros(max_depots, dtype=np.int8)
     depot_mask[:k] = 1
-    action_mask = np.zeros(max_tasks, dtype=np.int8)
-    action_mask[:m] = observation.action_mask
-    return {"agent": observation.agent, "tasks": tasks, "task_mask": task_mask,
-            "depots": depots, "depot_mask": depot_mask, "action_mask": action_mask}
+    action_mask = np.zeros(offset + max_tasks, dtype=np.int8)
+    action_mask[:offset + m] = observation.action_mask
+    padded = {"agent": observation.agent, "tasks": tasks, "task_mask": task_mask,
+              "depots": depots, "depot_mask": depot_mask, "action_mask": action_mask}
+    if observation.pass_token is not None:
+        padded["pass_token"] = observation.pass_token
+    return padded
 
 
 def unpad(padded: Mapping[str, np.ndarray]) -> Observation:
     m = int(np.asarray(padded["task_mask"]).sum())
     k = int(np.asarray(padded["depot_mask"]).sum())
+    pass_token = padded.get("pass_token")
+    offset = int(pass_token is not None)
     return Observation(np.asarray(padded["agent"], dtype=np.float32),
                        np.asarray(padded["tasks"][:m], dtype=np.float32),
                        np.asarray(padded["depots"][:k], dtype=np.float32),
-                       np.asarray(padded["action_mask"][:m], dtype=bool))
+                       np.asarray(padded["action_mask"][:offset + m], dtype=bool),
+                       None if pass_token is None else np.asarray(pass_token, np.float32))
 
 
 #: Builds the planning moment of an episode from a random generator.
@@ -164,32 +222,72 @@ def generated_moments(scales: Sequence[str], released_only: float = 0.5,
     return sample
 
 
+def replan_moments(scales: Sequence[str], method: str = "hocf",
+                   generator: ScenarioGenerator | None = None) -> MomentSampler:
+    """The planning moments a dynamic run meets: a generated instance of one of ``scales``
+    is run through the simulator with ``method`` (seeded from ``rng``), and one of its plan
+    calls' states is drawn uniformly: t = 0 or a re-plan with committed prefixes and the
+    tasks released by then (the simulator owns those rules)."""
+    from tsac_bench.planning import make_allocator
+    from tsac_bench.planning.simulator import simulate
+
+    generator = generator or ScenarioGenerator()
+    sizes = [parse_scale(s) for s in scales]
+    allocator = make_allocator(method)
+
+    class Recorder:
+        name = allocator.name
+
+        def __init__(self) -> None:
+            self.states: list[PlanningState] = []
+
+        def plan(self, state: PlanningState, *, seed: int = 0,
+                 time_limit: float | None = None) -> PlanResult:
+            self.states.append(state)
+            return allocator.plan(state, seed=seed, time_limit=time_limit)
+
+    def sample(rng: np.random.Generator) -> PlanningState:
+        n, m = sizes[int(rng.integers(len(sizes)))]
+        instance = generator.generate(n, m, int(rng.integers(2**31)))
+        recorder = Recorder()
+        simulate(instance, recorder, seed=int(rng.integers(2**31)))
+        return recorder.states[int(rng.integers(len(recorder.states)))]
+
+    return sample
+
+
 class TaskSelectionEnv(gym.Env):
     """Gymnasium environment of the OCF game's task-selection decision (module docstring).
 
     ``moments`` draws the planning moment of each episode (default: ``generated_moments``
-    over ``scales``); ``max_tasks``/``max_depots`` fix the padded observation space."""
+    over ``scales``); ``max_tasks``/``max_depots`` fix the padded observation space;
+    ``features`` is the version of ``FEATURE_SETS`` (2: competition columns and the pass
+    action 0; a pass earns reward 0)."""
 
     metadata = {"render_modes": []}  # noqa: RUF012 - Gymnasium's convention
 
     def __init__(self, scales: Sequence[str] = ("4/10", "8/20"), *, max_tasks: int = 80,
                  max_depots: int = 8, max_steps: int = 400,
                  reward_scale: float | None = None,
-                 moments: MomentSampler | None = None) -> None:
+                 moments: MomentSampler | None = None, features: int = 1) -> None:
         self.max_tasks, self.max_depots, self.max_steps = max_tasks, max_depots, max_steps
+        self.features = FEATURE_SETS[features]
+        offset = self.features.offset
         self.reward_scale = reward_scale
         self.scales = tuple(scales)
         self.moments = moments or generated_moments(self.scales)
         box = gym.spaces.Box
         self.observation_space = gym.spaces.Dict({
             "agent": box(-np.inf, np.inf, (AGENT_DIM,), np.float32),
-            "tasks": box(-np.inf, np.inf, (max_tasks, TASK_DIM), np.float32),
+            "tasks": box(-np.inf, np.inf, (max_tasks, self.features.task_dim), np.float32),
             "task_mask": gym.spaces.MultiBinary(max_tasks),
             "depots": box(-np.inf, np.inf, (max_depots, DEPOT_DIM), np.float32),
             "depot_mask": gym.spaces.MultiBinary(max_depots),
-            "action_mask": gym.spaces.MultiBinary(max_tasks),
+            "action_mask": gym.spaces.MultiBinary(offset + max_tasks),
+            **({"pass_token": box(-np.inf, np.inf, (DEPOT_DIM,), np.float32)}
+               if self.features.pass_action else {}),
         })
-        self.action_space = gym.spaces.Discrete(max_tasks)
+        self.action_space = gym.spaces.Discrete(offset + max_tasks)
         self.game: CoalitionGame | None = None
 
     @property
@@ -221,7 +319,7 @@ class TaskSelectionEnv(gym.Env):
             self._queue = self.np_random.permutation(self.game.n_aavs).tolist()[::-1]
 
     def _observation(self) -> dict[str, np.ndarray]:
-        return pad(observe(self._view), self.max_tasks, self.max_depots)
+        return pad(observe(self._view, self.features), self.max_tasks, self.max_depots)
 
     def reset(self, *, seed: int | None = None,
               options: dict | None = None) -> tuple[dict[str, np.ndarray], dict]:
@@ -242,10 +340,16 @@ class TaskSelectionEnv(gym.Env):
         if game is None:
             raise RuntimeError("call reset() before step()")
         index = int(action)
-        if not 0 <= index < len(game.visible) or game.visible[index] not in self._view.candidates:
+        mask = observe(self._view, self.features).action_mask
+        if not 0 <= index < len(mask) or not mask[index]:
             raise ValueError(f"action {index} is not a valid task for AAV {self._view.aav}")
         before = game.cost
-        accepted = game.decide(self._view.aav, game.visible[index])
+        choice = action_choice(self._view, index, self.features)
+        if choice == PASS:
+            game.pass_turn(self._view.aav)
+            accepted = False
+        else:
+            accepted = game.decide(self._view.aav, choice)
         reward = (before - game.cost) / self._scale
         self._steps += 1
         terminated = not self._next_turn()

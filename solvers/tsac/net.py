@@ -6,9 +6,10 @@ frozen actor inside the coalition game (the RL4CO split between policy and algor
 
 Shapes: a batch of B states, each with up to L task tokens and up to K depot tokens.
 ``task_mask``/``depot_mask`` are True for real tokens (False for padding);
-``action_mask`` is True for the tasks the deciding AAV may choose (the validity mask).
-Depot tokens are context only: Algorithm 1's moves are ADD/REMOVE on tasks, so the action
-space is the task tokens.
+``action_mask`` is True for the actions the deciding AAV may choose (the validity mask).
+The action space is the task tokens, led, when ``NetConfig.pass_action``, by a pass token
+(a depot row encoded by the depot encoder: the paper's depot action of M_t U D, "do nothing
+this turn"); the other depot tokens are context only.
 """
 
 from __future__ import annotations
@@ -31,6 +32,10 @@ class NetConfig:
     heads: int = 4
     layers: int = 2
     feedforward: int = 128
+    #: The version of the state and action space (``tsac_env.FEATURE_SETS``) the network
+    #: is built for; ``pass_action``: whether a pass token leads the action space.
+    features: int = 1
+    pass_action: bool = False
 
     def to_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -63,19 +68,24 @@ class StateEncoder(nn.Module):
                                                  enable_nested_tensor=False)
 
     def forward(self, agent: Tensor, tasks: Tensor, task_mask: Tensor, depots: Tensor,
-                depot_mask: Tensor) -> Tensor:
-        n_tasks = tasks.shape[1]
-        agent_embedding = self.agent(agent)
-        tokens = torch.cat([self.task(tasks), self.depot(depots)], dim=1)
-        context = agent_embedding.unsqueeze(1).expand(-1, tokens.shape[1], -1)
+                depot_mask: Tensor, pass_token: Tensor | None = None) -> Tensor:
+        """The encoded action tokens: the pass token (if given), then the tasks."""
+        parts = [self.task(tasks), self.depot(depots)]
+        masks = [task_mask, depot_mask]
+        if pass_token is not None:
+            parts.insert(0, self.depot(pass_token).unsqueeze(1))
+            masks.insert(0, torch.ones_like(task_mask[:, :1]))
+        n_actions = tasks.shape[1] + (pass_token is not None)
+        tokens = torch.cat(parts, dim=1)
+        context = self.agent(agent).unsqueeze(1).expand(-1, tokens.shape[1], -1)
         fused = self.fuse(torch.cat([context, tokens], dim=-1))
-        real = torch.cat([task_mask, depot_mask], dim=1)
+        real = torch.cat(masks, dim=1)
         encoded = self.transformer(fused, src_key_padding_mask=~real)
-        return encoded[:, :n_tasks]
+        return encoded[:, :n_actions]
 
 
 class TokenHead(nn.Module):
-    """A state encoder and an MLP giving one number per task token."""
+    """A state encoder and an MLP giving one number per action token."""
 
     def __init__(self, config: NetConfig) -> None:
         super().__init__()
@@ -85,7 +95,7 @@ class TokenHead(nn.Module):
 
     def forward(self, obs: Mapping[str, Tensor]) -> Tensor:
         encoded = self.encoder(obs["agent"], obs["tasks"], obs["task_mask"], obs["depots"],
-                               obs["depot_mask"])
+                               obs["depot_mask"], obs.get("pass_token"))
         return self.head(encoded).squeeze(-1)
 
 
@@ -130,12 +140,15 @@ class State(Protocol):
     tasks: np.ndarray
     depots: np.ndarray
     action_mask: np.ndarray
+    pass_token: np.ndarray | None
 
 
 def collate(states: Sequence[State], device: torch.device | str = "cpu") -> dict[str, Tensor]:
     """Pad a batch of variable-length states to the longest one in the batch (L_max of
-    Eq. 17) and build the padding masks (P_mask) and validity masks."""
+    Eq. 17) and build the padding masks (P_mask) and validity masks. A leading pass token
+    keeps action indices as they are in each state (pass first, then its task rows)."""
     batch = len(states)
+    offset = int(states[0].pass_token is not None)
     length = max(len(s.tasks) for s in states)
     depots = max(len(s.depots) for s in states)
     task_dim, depot_dim = states[0].tasks.shape[1], states[0].depots.shape[1]
@@ -143,15 +156,17 @@ def collate(states: Sequence[State], device: torch.device | str = "cpu") -> dict
     depot_rows = np.zeros((batch, depots, depot_dim), dtype=np.float32)
     task_mask = np.zeros((batch, length), dtype=bool)
     depot_mask = np.zeros((batch, depots), dtype=bool)
-    action_mask = np.zeros((batch, length), dtype=bool)
+    action_mask = np.zeros((batch, offset + length), dtype=bool)
     for i, s in enumerate(states):
         m, k = len(s.tasks), len(s.depots)
         tasks[i, :m] = s.tasks
         depot_rows[i, :k] = s.depots
         task_mask[i, :m] = True
         depot_mask[i, :k] = True
-        action_mask[i, :m] = s.action_mask
+        action_mask[i, :offset + m] = s.action_mask
     arrays = {"agent": np.stack([s.agent for s in states]).astype(np.float32),
               "tasks": tasks, "task_mask": task_mask, "depots": depot_rows,
               "depot_mask": depot_mask, "action_mask": action_mask}
+    if offset:
+        arrays["pass_token"] = np.stack([s.pass_token for s in states]).astype(np.float32)
     return {name: torch.from_numpy(a).to(device) for name, a in arrays.items()}

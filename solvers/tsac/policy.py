@@ -27,8 +27,23 @@ from tsac_bench.planning import (
     PlanResult,
     declare,
 )
-from tsac_bench.solvers.ocf.engine import DecisionView, OCFAllocator, SelectionRule
-from tsac_bench.solvers.tsac.env import observe
+from tsac_bench.solvers.ocf.engine import (
+    C_MAX,
+    INIT,
+    K_MAX,
+    SAMPLES,
+    DecisionView,
+    OCFAllocator,
+    SelectionRule,
+)
+from tsac_bench.solvers.tsac.env import (
+    AGENT_DIM,
+    DEPOT_DIM,
+    FEATURE_SETS,
+    FeatureSet,
+    action_choice,
+    observe,
+)
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate
 
 DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
@@ -57,7 +72,19 @@ def load_policy(path: Path | str = DEFAULT_POLICY) -> PolicyNet:
         raise PolicyFileError(f"{path}: cannot read the policy ({exc})") from None
     if not isinstance(payload, dict) or payload.get("format") != POLICY_FORMAT:
         raise PolicyFileError(f"{path}: format: expected {POLICY_FORMAT!r}")
-    actor = PolicyNet(NetConfig(**payload["config"]))
+    # Files written before feature set 2 existed carry no "features": they are version 1.
+    config = NetConfig(**payload["config"])
+    features = FEATURE_SETS.get(config.features)
+    if features is None:
+        raise PolicyFileError(f"{path}: config.features: feature set {config.features} is "
+                              f"unknown here (known: {', '.join(map(str, FEATURE_SETS))})")
+    shape = (AGENT_DIM, features.task_dim, DEPOT_DIM, features.pass_action)
+    if (config.agent_dim, config.task_dim, config.depot_dim, config.pass_action) != shape:
+        raise PolicyFileError(
+            f"{path}: config: the network's inputs (agent {config.agent_dim}, task "
+            f"{config.task_dim}, depot {config.depot_dim}, pass {config.pass_action}) do not "
+            f"fit feature set {features.version} of this version {shape}: retrain the policy")
+    actor = PolicyNet(config)
     try:
         actor.load_state_dict(payload["actor"])
     except RuntimeError as exc:
@@ -79,11 +106,13 @@ class PolicySelection:
     def __init__(self, actor: PolicyNet, temperature: float = 1.0) -> None:
         self.actor = actor
         self.temperature = temperature
+        self.features: FeatureSet = FEATURE_SETS[actor.config.features]
 
     def probabilities(self, view: DecisionView) -> np.ndarray:
-        """pi(.|s) over ``view.game.visible``: exactly 0 outside the candidates."""
+        """pi(.|s) over the actions (the pass first with feature set 2, then
+        ``view.game.visible``): exactly 0 outside the valid ones."""
         with torch.inference_mode():
-            logits = self.actor(collate([observe(view)]))[0].double()
+            logits = self.actor(collate([observe(view, self.features)]))[0].double()
         if self.temperature > 0:
             return torch.softmax(logits / self.temperature, dim=-1).numpy()
         best = torch.zeros_like(logits)
@@ -92,7 +121,7 @@ class PolicySelection:
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
         p = self.probabilities(view)
-        return view.game.visible[int(rng.choice(len(p), p=p))]
+        return action_choice(view, int(rng.choice(len(p), p=p)), self.features)
 
 
 class TSACOCFAllocator(OCFAllocator):
@@ -105,8 +134,9 @@ class TSACOCFAllocator(OCFAllocator):
                                   temperature=Interval(float, 0, None))
 
     def __init__(self, policy: str | None = None, temperature: float = 1.0,
-                 k_max: int = 200_000, c_max: int = 5_000, init: str = "incumbent") -> None:
-        super().__init__(k_max=k_max, c_max=c_max, init=init)
+                 k_max: int = K_MAX, c_max: int = C_MAX, init: str = INIT,
+                 samples: int = SAMPLES) -> None:
+        super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples)
         self.policy = policy
         self.temperature = temperature
 

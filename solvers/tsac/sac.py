@@ -1,8 +1,12 @@
 """Discrete soft actor-critic for the task-selection policy (paper Sec. III-B-2, Eqs. 14-17)
 and the training run behind ``tsac-bench train``.
 
-* Twin critics Q_theta1, Q_theta2 with Polyak-averaged target copies; the critic target is
-  the exact expectation over the next state's valid actions (Eq. 15), not a sample.
+* Twin critics Q_theta1, Q_theta2. Two learning signals (``TrainConfig.signal``):
+  "rollout" (default): the critics regress rollout labels, Q(s, a) = minus the final J
+  after action a and a completion of the game by HOCF with common random AAV orders
+  (``rollout_values``), centred per state: soft policy iteration. "td": Polyak-averaged
+  target copies and the per-decision reward -dJ, the target being the exact expectation
+  over the next state's valid actions (Eq. 15), not a sample.
 * The actor minimises Eq. 16, the expectation over the valid actions of
   alpha log pi - min_j Q_j.
 * The temperature alpha is learned (automatic entropy tuning): the target entropy of a state
@@ -11,7 +15,9 @@ and the training run behind ``tsac-bench train``.
 * The replay buffer keeps states unpadded; a sampled batch is padded to its own longest
   state (L_max of Eq. 17) and every sum over actions runs under the padding and validity
   masks, so padded entries contribute neither value nor gradient.
-* Curriculum: the scales an episode is drawn from change with the share of steps done.
+* Curriculum: the scales an episode is drawn from change with the share of steps done;
+  with the rollout signal, half the episodes are moments of simulated dynamic runs
+  (re-plans with committed prefixes) and the cloning weight is annealed to 0.
 
 Files written to the output folder: ``checkpoint.pt`` (everything needed to resume),
 ``policy.pt`` (the actor alone, the form ``tsac-ocf`` loads), ``curve.json`` and
@@ -37,13 +43,27 @@ from torch.nn import functional as F
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import generate
 from tsac_bench.planning import PlanningState, make_allocator
-from tsac_bench.solvers.ocf.engine import CoalitionGame
+from tsac_bench.solvers.ocf.engine import (
+    C_MAX,
+    K_MAX,
+    PASS,
+    CoalitionGame,
+    DecisionView,
+    SelectionRule,
+    sample_rng,
+)
 from tsac_bench.solvers.tsac.env import (
     AGENT_DIM,
     DEPOT_DIM,
-    TASK_DIM,
+    FEATURE_SETS,
+    FeatureSet,
+    MomentSampler,
     Observation,
     TaskSelectionEnv,
+    action_choice,
+    generated_moments,
+    observe,
+    replan_moments,
     unpad,
 )
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate, expectation
@@ -57,8 +77,13 @@ class SACConfig:
     tau: float = 0.01  # Polyak step of the target critics
     batch_size: int = 64
     buffer_size: int = 20_000
-    target_entropy_ratio: float = 0.3
+    #: The target entropy per state is this share of the uniform policy's. The first policy
+    #: (td, 0.3) never reached 0.3 while cloned, so alpha climbed without end.
+    target_entropy_ratio: float = 0.1
     initial_alpha: float = 0.05
+    #: A faster step for log alpha than for the networks, so that alpha follows the entropy
+    #: target within a few hundred updates instead of drifting for thousands.
+    alpha_lr: float = 3e-3
 
 
 @dataclass(frozen=True)
@@ -110,6 +135,59 @@ class Batch:
                    torch.tensor([float(t.done) for t in transitions], device=device))
 
 
+def rollout_values(game: CoalitionGame, view: DecisionView, actions: Sequence[int],
+                   features: FeatureSet, completion: SelectionRule, *, rollouts: int,
+                   seed: int) -> np.ndarray:
+    """The final J of each action's rollouts, shape (len(actions), rollouts): on a fork of
+    the game, the deciding AAV takes the action (a pass, or the ADD/REMOVE of a task, which
+    the engine accepts or rejects), then ``completion`` finishes the game (new rounds, the
+    engine's stop rules) with the generator ``sample_rng(seed, r)`` for rollout r: the same
+    AAV orders for every action of the state (common random numbers), so their labels
+    differ by the actions, not by the draws."""
+    values = np.empty((len(actions), rollouts))
+    for i, action in enumerate(actions):
+        choice = action_choice(view, action, features)
+        for r in range(rollouts):
+            fork = game.fork()
+            if choice == PASS:
+                fork.pass_turn(view.aav)
+            else:
+                fork.decide(view.aav, choice)
+            fork.run(completion, sample_rng(seed, r), k_max=K_MAX, c_max=C_MAX)
+            values[i, r] = fork.cost
+    return values
+
+
+@dataclass(frozen=True)
+class Labelled:
+    """A state with the rollout value of some of its valid actions: ``q`` is minus the mean
+    final J of each action's rollouts, centred on the mean over the labelled actions and
+    divided by the label scale (the actor's loss is blind to a per-state constant)."""
+
+    state: Observation
+    actions: tuple[int, ...]
+    q: tuple[float, ...]
+
+
+@dataclass
+class LabelledBatch:
+    states: dict[str, Tensor]
+    label_mask: Tensor  # (B, actions) True where a label exists
+    labels: Tensor  # (B, actions), 0 where none
+
+    @classmethod
+    def of(cls, items: Sequence[Labelled], device: torch.device | str) -> LabelledBatch:
+        states = collate([item.state for item in items], device)
+        shape = states["action_mask"].shape
+        mask = torch.zeros(shape, dtype=torch.bool)
+        labels = torch.zeros(shape)
+        for i, item in enumerate(items):
+            index = torch.tensor(item.actions)
+            mask[i, index] = True
+            labels[i, index] = torch.tensor(item.q, dtype=torch.float32)
+        return cls(states, mask.to(device), labels.to(device))
+
+
 class DiscreteSAC:
     """The actor, the twin critics, their targets, alpha and the optimisers."""
 
@@ -124,7 +202,7 @@ class DiscreteSAC:
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=config.lr)
         self.critic_optimizer = torch.optim.Adam(
             [p for q in self.critics for p in q.parameters()], lr=config.lr)
-        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.lr)
+        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.alpha_lr)
 
     @property
     def alpha(self) -> Tensor:
@@ -157,6 +235,42 @@ class DiscreteSAC:
         target = self.config.target_entropy_ratio * torch.log(
             action_mask.sum(dim=-1).clamp(min=1).float())
         return (self.log_alpha * (entropy - target)).mean()
+
+    def label_loss(self, batch: LabelledBatch) -> Tensor:
+        """The critics regressed on rollout labels (Huber, over the labelled actions only),
+        summed over the two critics: policy evaluation by Monte Carlo rollouts."""
+        count = batch.label_mask.sum().clamp(min=1)
+        zero = torch.zeros((), device=batch.labels.device)
+        loss = zero
+        for q in self.critics:
+            error = F.smooth_l1_loss(q(batch.states), batch.labels, reduction="none")
+            loss = loss + torch.where(batch.label_mask, error, zero).sum() / count
+        return loss
+
+    def update_from_labels(self, batch: LabelledBatch, demonstrations: Batch | None = None,
+                           clone_weight: float = 0.0) -> dict[str, float]:
+        """One step of soft policy iteration: the critics fit the rollout labels, the actor
+        minimises Eq. 16 against them (plus ``clone_weight`` times the cross-entropy on
+        demonstrations), the temperature follows its entropy target."""
+        critic_loss = self.label_loss(batch)
+        self.critic_optimizer.zero_grad()
+        critic_loss.backward()
+        self.critic_optimizer.step()
+        states = Batch(batch.states, torch.zeros(0), torch.zeros(0), batch.states,
+                       torch.zeros(0))
+        actor_loss, entropy = self.actor_loss(states)
+        if demonstrations is not None and clone_weight > 0:
+            actor_loss = actor_loss + clone_weight * self.clone_loss(demonstrations)
+        self.actor_optimizer.zero_grad()
+        actor_loss.backward()
+        self.actor_optimizer.step()
+        alpha_loss = self.alpha_loss(entropy, batch.states["action_mask"])
+        self.alpha_optimizer.zero_grad()
+        alpha_loss.backward()
+        self.alpha_optimizer.step()
+        return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(),
+                "entropy": entropy.mean().item(), "alpha": self.alpha.item(),
+                "clone_weight": clone_weight}
 
     def imitate(self, batch: Batch) -> dict[str, float]:
         """One pre-training step: the actor by cross-entropy on the batch's actions (a
@@ -230,38 +344,82 @@ class DiscreteSAC:
 
 # --- the training run --------------------------------------------------------------------
 #: (share of the steps from which the stage applies, the scales episodes are drawn from)
+#: The small scales stay to the end: a short run that dropped 8/20 at 40 % of its steps
+#: ended 22 % above HOCF there while level with it at 16/40 and 32/80.
 DEFAULT_CURRICULUM: tuple[tuple[float, tuple[str, ...]], ...] = (
-    (0.0, ("4/10", "8/20")),
-    (0.3, ("8/20", "16/40")),
-    (0.7, ("16/40",)),
+    (0.0, ("4/10", "8/20", "16/40")),
+    (0.3, ("8/20", "16/40", "32/80")),
 )
+SIGNALS = ("rollout", "td")
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     steps: int = 16_000
     seed: int = 0
-    warmup: int = 4_000  # decisions collected before the first update
+    #: "rollout": critic targets from rollouts (soft policy iteration, docs/tsac.md);
+    #: "td": the per-decision reward -dJ / (w1 + w2) with Eqs. 14-15 (the first policy's).
+    signal: str = "rollout"
+    features: int = 2  # the version of tsac_env.FEATURE_SETS
+    warmup: int = 1_000  # decisions taken by the demonstrator before the first update
     #: Who takes the warm-up decisions: a registered OCF method's selection rule (its
     #: decisions then also pre-train the actor by imitation and stay as demonstrations)
     #: or None (uniformly random).
     demonstrator: str | None = "hocf"
-    pretrain_updates: int = 1_000  # imitation + critic steps after the warm-up
+    pretrain_updates: int = 500  # imitation (+ critic) steps after the warm-up
     clone_weight: float = 2.0  # weight of the demonstrations' cross-entropy in SAC's actor loss
-    update_every: int = 2  # env steps per gradient update
+    #: rollout signal: the cloning weight falls linearly from ``clone_weight`` after the
+    #: warm-up to 0 at this share of the steps (td: constant). 1: in three short runs the
+    #: gauge was best while the weight was fading (0.8 to 0.5 of 2) and got worse within
+    #: 2 000 steps of reaching 0, so the critic is given the whole run to take over.
+    clone_until: float = 1.0
+    update_every: int = 2  # td: env steps per gradient update
     curriculum: tuple[tuple[float, tuple[str, ...]], ...] = DEFAULT_CURRICULUM
-    episode_steps: int = 400  # truncation of one episode (one OCF game)
+    #: rollout signal: share of the episodes played on a moment of a simulated dynamic run
+    #: (t = 0 or a re-plan); the others are t = 0 moments (static or released-only).
+    replan_share: float = 0.5
+    label_share: float = 0.25  # rollout: share of the decisions whose actions are labelled
+    label_candidates: int = 8  # rollout: most actions labelled per state (drawn uniformly)
+    rollouts: int = 2  # rollout: completions per labelled action (common AAV orders)
+    completion: str = "hocf"  # rollout: the OCF method that finishes the game
+    #: rollout: J units per unit of Q. 1: label differences (0.1-5 J) stand well above
+    #: alpha log pi; at 10 the soft-greedy policy was near-uniform (entropy 1.6-2.0 nats).
+    label_scale: float = 1.0
+    updates_per_label: int = 1  # rollout: gradient steps per labelled state
+    episode_steps: int = 600  # truncation of one episode (one OCF game)
     eval_every: int = 2_000
     eval_scale: str = "16/40"
     eval_instances: int = 3
     checkpoint_every: int = 1_000
-    net: NetConfig = field(default_factory=lambda: NetConfig(
-        AGENT_DIM, TASK_DIM, DEPOT_DIM, d_model=32, heads=4, layers=2, feedforward=64))
+    net: NetConfig | None = None  # default: d_model 32, 4 heads, 2 layers, ff 64
     sac: SACConfig = field(default_factory=SACConfig)
+
+    def __post_init__(self) -> None:
+        if self.signal not in SIGNALS:
+            raise ValueError(f"signal must be one of {', '.join(SIGNALS)}, got {self.signal!r}")
+        if self.features not in FEATURE_SETS:
+            raise ValueError(f"features must be one of {sorted(FEATURE_SETS)}")
+        fs = FEATURE_SETS[self.features]
+        if self.net is None:
+            object.__setattr__(self, "net", NetConfig(
+                AGENT_DIM, fs.task_dim, DEPOT_DIM, d_model=32, heads=4, layers=2,
+                feedforward=64, features=fs.version, pass_action=fs.pass_action))
+        elif (self.net.features, self.net.task_dim, self.net.pass_action) != (
+                fs.version, fs.task_dim, fs.pass_action):
+            raise ValueError(f"net: built for feature set {self.net.features}, not "
+                             f"{self.features}")
 
     def scales_at(self, step: int) -> tuple[str, ...]:
         share = step / max(1, self.steps)
         return next(scales for start, scales in reversed(self.curriculum) if share >= start)
+
+    def clone_weight_at(self, step: int) -> float:
+        if self.signal == "td":
+            return self.clone_weight
+        end = self.clone_until * self.steps
+        if end <= self.warmup:
+            return 0.0
+        return self.clone_weight * max(0.0, 1.0 - (step - self.warmup) / (end - self.warmup))
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -298,18 +456,68 @@ class Evaluation:
         actor.eval()
         for i, state in enumerate(self.states):
             game = CoalitionGame(state, state.base_routes())
-            game.run(PolicySelection(actor), np.random.default_rng(i), k_max=200_000,
-                     c_max=5_000)
+            game.run(PolicySelection(actor), np.random.default_rng(i), k_max=K_MAX,
+                     c_max=C_MAX)
             costs.append(game.cost)
         actor.train()
         return {"eval_J": float(np.mean(costs)),
                 "eval_ratio_hocf": float(np.mean(costs) / np.mean(self.reference))}
 
 
+class _Run:
+    """What a training run carries between steps and across a resume."""
+
+    def __init__(self, out: Path, config: TrainConfig, device: torch.device,
+                 checkpoint: dict[str, Any] | None) -> None:
+        self.out, self.config, self.device = out, config, device
+        torch.manual_seed(config.seed)
+        self.sac = DiscreteSAC(config.net, config.sac, device)
+        self.buffer = ReplayBuffer(config.sac.buffer_size)
+        self.demos = ReplayBuffer(config.warmup)  # the demonstrator's decisions
+        self.rng = np.random.default_rng(config.seed)
+        self.sampler = torch.Generator().manual_seed(config.seed)
+        self.log: dict[str, list] = {"updates": [], "episodes": [], "evals": []}
+        self.step, self.episode, seconds = 0, 0, 0.0
+        if checkpoint is not None:
+            self.sac.load_state_dict(checkpoint["sac"])
+            self.buffer.items = checkpoint["buffer"]
+            self.buffer.position = checkpoint["buffer_position"]
+            self.demos.items = checkpoint["demonstrations"]
+            self.rng.bit_generator.state = checkpoint["rng"]
+            self.sampler.set_state(checkpoint["sampler"])
+            self.log, self.step = checkpoint["log"], checkpoint["step"]
+            self.episode, seconds = checkpoint["episode"], checkpoint["seconds"]
+        self.began = time.perf_counter() - seconds
+        self.evaluate = Evaluation(config)
+
+    def save_checkpoint(self) -> None:
+        torch.save({"config": self.config.to_dict(), "sac": self.sac.state_dict(),
+                    "buffer": self.buffer.items, "demonstrations": self.demos.items,
+                    "buffer_position": self.buffer.position,
+                    "rng": self.rng.bit_generator.state, "sampler": self.sampler.get_state(),
+                    "log": self.log, "step": self.step, "episode": self.episode,
+                    "seconds": time.perf_counter() - self.began},
+                   self.out / "checkpoint.pt")
+
+    def evaluate_now(self, stats: dict[str, float]) -> dict[str, float]:
+        """The curve's gauge; the actor of each gauge point is kept (``policy-STEP.pt``),
+        so that a run's best point can be chosen on the gauge, not on test instances."""
+        self.log["evals"].append({"step": self.step, "seconds":
+                                  time.perf_counter() - self.began,
+                                  **self.evaluate(self.sac.actor)})
+        save_policy(self.sac.actor, self.out / f"policy-{self.step}.pt",
+                    {"steps": self.step, "seed": self.config.seed,
+                     "config": self.config.to_dict(), **self.log["evals"][-1]})
+        return {**stats, **self.log["evals"][-1]}
+
+
 def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path | None = None,
-          on_step: Callable[[int, dict[str, float]], None] | None = None) -> dict[str, Any]:
+          on_step: Callable[[int, dict[str, float]], None] | None = None,
+          stop_after: float | None = None) -> dict[str, Any]:
     """Train from scratch (or from ``resume``'s checkpoint) up to ``config.steps`` env
-    steps; returns the summary written to ``curve.json``."""
+    steps; returns the summary written to ``curve.json``. ``stop_after`` (seconds of this
+    call; rollout signal) ends the call early at an episode's end, with a checkpoint to
+    resume from and the policy so far."""
     out.mkdir(parents=True, exist_ok=True)
     torch_device = resolve_device(device)
     checkpoint = None
@@ -317,37 +525,29 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
         checkpoint = torch.load(resume, map_location=torch_device, weights_only=False)
         # The run goes on as it was configured; only its length may change.
         config = TrainConfig.from_dict({**checkpoint["config"], "steps": config.steps})
-    torch.manual_seed(config.seed)
-    sac = DiscreteSAC(config.net, config.sac, torch_device)
-    buffer = ReplayBuffer(config.sac.buffer_size)
-    demos = ReplayBuffer(config.warmup)  # the demonstrator's decisions, never overwritten
-    rng = np.random.default_rng(config.seed)
-    sampler = torch.Generator().manual_seed(config.seed)
-    log: dict[str, list] = {"updates": [], "episodes": [], "evals": []}
-    step, episode, seconds = 0, 0, 0.0
-    if checkpoint is not None:
-        sac.load_state_dict(checkpoint["sac"])
-        buffer.items, buffer.position = checkpoint["buffer"], checkpoint["buffer_position"]
-        demos.items = checkpoint["demonstrations"]
-        rng.bit_generator.state = checkpoint["rng"]
-        sampler.set_state(checkpoint["sampler"])
-        log, step, episode = checkpoint["log"], checkpoint["step"], checkpoint["episode"]
-        seconds = checkpoint["seconds"]
-    evaluate = Evaluation(config)
-    env = TaskSelectionEnv(config.scales_at(step), max_steps=config.episode_steps)
-    began = time.perf_counter() - seconds
+    run = _Run(out, config, torch_device, checkpoint)
+    if config.signal == "td":
+        _train_td(run, on_step)
+    else:
+        _train_rollout(run, on_step, stop_after)
+    seconds = time.perf_counter() - run.began
+    meta = {"steps": run.step, "episode_count": run.episode, "seed": config.seed,
+            "seconds": seconds, "device": str(torch_device), "torch": torch.__version__,
+            "threads": torch.get_num_threads(), "config": config.to_dict()}
+    save_policy(run.sac.actor, out / "policy.pt", meta)
+    summary = {**meta, **run.log}
+    (out / "curve.json").write_text(json.dumps(summary, indent=1))
+    plot_curve(summary, out / "curve.png")
+    return summary
 
-    def save_checkpoint() -> None:
-        torch.save({"config": config.to_dict(), "sac": sac.state_dict(), "buffer": buffer.items,
-                    "demonstrations": demos.items,
-                    "buffer_position": buffer.position, "rng": rng.bit_generator.state,
-                    "sampler": sampler.get_state(), "log": log, "step": step,
-                    "episode": episode, "seconds": time.perf_counter() - began},
-                   out / "checkpoint.pt")
 
+def _train_td(run: _Run, on_step: Callable[[int, dict[str, float]], None] | None) -> None:
+    """The per-decision reward and Eqs. 14-15 (the first shipped policy's signal)."""
+    config, sac, rng, device = run.config, run.sac, run.rng, run.device
+    env = TaskSelectionEnv(config.scales_at(run.step), max_steps=config.episode_steps,
+                           features=config.features)
     demonstrator = (make_allocator(config.demonstrator) if config.demonstrator is not None
-                     else None)
-    expert_run = demonstrator is not None
+                    else None)
 
     def reset(**kwargs: Any) -> tuple[Observation, float, Any]:
         padded, info = env.reset(**kwargs)
@@ -357,58 +557,183 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
     state, start_J, expert = reset(seed=int(rng.integers(2**31)))
     returns = 0.0
     stats: dict[str, float] = {}
-    while step < config.steps:
-        if step < config.warmup and expert is not None:
-            action = env.game.visible.index(expert.select(env.view, rng))
-        elif step < config.warmup:
+    offset = env.features.offset
+    while run.step < config.steps:
+        if run.step < config.warmup and expert is not None:
+            action = offset + env.game.visible.index(expert.select(env.view, rng))
+        elif run.step < config.warmup:
             action = int(rng.choice(np.flatnonzero(state.action_mask)))
         else:
             with torch.no_grad():
-                probs, _ = sac.actor.distribution(collate([state], torch_device))
-            action = int(torch.multinomial(probs[0].cpu(), 1, generator=sampler))
+                probs, _ = sac.actor.distribution(collate([state], device))
+            action = int(torch.multinomial(probs[0].cpu(), 1, generator=run.sampler))
         padded, reward, terminated, truncated, info = env.step(action)
         next_state = unpad(padded)
         transition = Transition(state, action, reward, next_state, terminated)
-        buffer.add(transition)
-        if step < config.warmup and expert is not None:
-            demos.add(transition)
-        state, returns, step = next_state, returns + reward, step + 1
+        run.buffer.add(transition)
+        if run.step < config.warmup and expert is not None:
+            run.demos.add(transition)
+        state, returns, run.step = next_state, returns + reward, run.step + 1
+        step = run.step
         if step > config.warmup and step % config.update_every == 0:
-            demonstrations = (Batch.of(demos.sample(config.sac.batch_size, rng), torch_device)
-                              if expert_run and len(demos) else None)
-            stats = sac.update(Batch.of(buffer.sample(config.sac.batch_size, rng),
-                                        torch_device), demonstrations, config.clone_weight)
+            demonstrations = (Batch.of(run.demos.sample(config.sac.batch_size, rng), device)
+                              if demonstrator is not None and len(run.demos) else None)
+            stats = sac.update(Batch.of(run.buffer.sample(config.sac.batch_size, rng),
+                                        device), demonstrations, config.clone_weight)
             if step % 50 < config.update_every:
-                log["updates"].append({"step": step, **stats})
+                run.log["updates"].append({"step": step, **stats})
         if terminated or truncated:
-            log["episodes"].append({"step": step, "return": returns, "J_start": start_J,
-                                    "J_end": info["J"], "scales": list(env.scales)})
-            episode += 1
+            run.log["episodes"].append({"step": step, "return": returns, "J_start": start_J,
+                                        "J_end": info["J"], "scales": list(env.scales)})
+            run.episode += 1
             env.set_scales(config.scales_at(step))
             state, start_J, expert = reset()
             returns = 0.0
         if step == config.warmup and expert is not None:
             for i in range(config.pretrain_updates):
-                stats = sac.imitate(Batch.of(buffer.sample(config.sac.batch_size, rng),
-                                             torch_device))
+                stats = sac.imitate(Batch.of(run.buffer.sample(config.sac.batch_size, rng),
+                                             device))
                 if i % 50 == 0:
-                    log.setdefault("pretrain", []).append({"update": i, **stats})
+                    run.log.setdefault("pretrain", []).append({"update": i, **stats})
         if step % config.eval_every == 0 or step == config.steps:
-            log["evals"].append({"step": step, **evaluate(sac.actor)})
-            stats = {**stats, **log["evals"][-1]}
+            stats = run.evaluate_now(stats)
         if step % config.checkpoint_every == 0 or step == config.steps:
-            save_checkpoint()
+            run.save_checkpoint()
         if on_step is not None:
             on_step(step, stats)
-    seconds = time.perf_counter() - began
-    meta = {"steps": step, "episode_count": episode, "seed": config.seed, "seconds": seconds,
-            "device": str(torch_device), "torch": torch.__version__,
-            "threads": torch.get_num_threads(), "config": config.to_dict()}
-    save_policy(sac.actor, out / "policy.pt", meta)
-    summary = {**meta, **log}
-    (out / "curve.json").write_text(json.dumps(summary, indent=1))
-    plot_curve(summary, out / "curve.png")
-    return summary
+
+
+class _Behaviour:
+    """The selection rule that plays a training episode: the demonstrator during the
+    warm-up, then the actor (sampled); it labels a share of the decisions with rollouts and
+    takes the gradient steps."""
+
+    def __init__(self, run: _Run, state: PlanningState,
+                 on_step: Callable[[int, dict[str, float]], None] | None) -> None:
+        config = run.config
+        self.run, self.on_step = run, on_step
+        self.features = FEATURE_SETS[config.features]
+        self.demonstrator = (make_allocator(config.demonstrator).rule(state)
+                             if config.demonstrator is not None else None)
+        self.completion = make_allocator(config.completion).rule(state)
+        self.stats: dict[str, float] = {}
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
+        run, config, sac = self.run, self.run.config, self.run.sac
+        observation = observe(view, self.features)
+        valid = np.flatnonzero(observation.action_mask)
+        warming = run.step < config.warmup
+        if warming and self.demonstrator is not None:
+            action = (self.features.offset
+                      + view.game.visible.index(self.demonstrator.select(view, rng)))
+            run.demos.add(Transition(observation, action, 0.0, observation, False))
+        elif warming:
+            action = int(rng.choice(valid))
+        else:
+            with torch.no_grad():
+                probs, _ = sac.actor.distribution(collate([observation], run.device))
+            action = int(torch.multinomial(probs[0].cpu(), 1, generator=run.sampler))
+        if len(valid) > 1 and rng.random() < config.label_share:
+            self.label(view, observation, valid, rng)
+        run.step += 1
+        step = run.step
+        if step == config.warmup and self.demonstrator is not None:
+            self.pretrain()
+        if step % config.eval_every == 0 or step == config.steps:
+            self.stats = run.evaluate_now(self.stats)
+        if self.on_step is not None:
+            self.on_step(step, self.stats)
+        return action_choice(view, action, self.features)
+
+    def label(self, view: DecisionView, observation: Observation, valid: np.ndarray,
+              rng: np.random.Generator) -> None:
+        run, config = self.run, self.run.config
+        actions = (valid if len(valid) <= config.label_candidates else
+                   np.sort(rng.choice(valid, config.label_candidates, replace=False)))
+        finals = rollout_values(view.game, view, actions.tolist(), self.features,
+                                self.completion, rollouts=config.rollouts,
+                                seed=int(rng.integers(2**31))).mean(axis=1)
+        q = -(finals - finals.mean()) / config.label_scale
+        run.buffer.add(Labelled(observation, tuple(actions.tolist()), tuple(q.tolist())))
+        run.log.setdefault("labels", []).append(
+            {"step": run.step, "actions": len(actions), "spread_J": float(np.ptp(finals))})
+        if run.step >= config.warmup:
+            for _ in range(config.updates_per_label):
+                self.stats = self.update()
+            run.log["updates"].append({"step": run.step, **self.stats})
+
+    def demonstrations(self) -> Batch | None:
+        run = self.run
+        if not len(run.demos):
+            return None
+        return Batch.of(run.demos.sample(run.config.sac.batch_size, run.rng), run.device)
+
+    def update(self) -> dict[str, float]:
+        run, config = self.run, self.run.config
+        batch = LabelledBatch.of(run.buffer.sample(config.sac.batch_size, run.rng), run.device)
+        weight = config.clone_weight_at(run.step)
+        return run.sac.update_from_labels(batch, self.demonstrations() if weight > 0 else None,
+                                          weight)
+
+    def pretrain(self) -> None:
+        """Imitation of the demonstrator's decisions; the critics fit the labels so far."""
+        run, sac = self.run, self.run.sac
+        for i in range(run.config.pretrain_updates):
+            demos = self.demonstrations()
+            assert demos is not None
+            clone = sac.clone_loss(demos)
+            sac.actor_optimizer.zero_grad()
+            clone.backward()
+            sac.actor_optimizer.step()
+            stats = {"clone_loss": clone.item()}
+            if len(run.buffer):
+                batch = LabelledBatch.of(run.buffer.sample(run.config.sac.batch_size, run.rng),
+                                         run.device)
+                critic = sac.label_loss(batch)
+                sac.critic_optimizer.zero_grad()
+                critic.backward()
+                sac.critic_optimizer.step()
+                stats["critic_loss"] = critic.item()
+            if i % 50 == 0:
+                run.log.setdefault("pretrain", []).append({"update": i, **stats})
+
+
+def training_moments(config: TrainConfig, step: int, rng: np.random.Generator
+                     ) -> PlanningState:
+    """The planning moment of the next episode (curriculum scales at ``step``)."""
+    scales = config.scales_at(step)
+    sampler: MomentSampler = (replan_moments(scales) if rng.random() < config.replan_share
+                              else generated_moments(scales))
+    return sampler(rng)
+
+
+def _train_rollout(run: _Run, on_step: Callable[[int, dict[str, float]], None] | None,
+                   stop_after: float | None = None) -> None:
+    """Soft policy iteration with rollout labels (docs/tsac.md): episodes are OCF games on
+    training moments played by ``_Behaviour``; a checkpoint is written at the end of the
+    first episode after each ``checkpoint_every`` steps, and a resume starts a new episode."""
+    config = run.config
+    next_checkpoint = (run.step // config.checkpoint_every + 1) * config.checkpoint_every
+    deadline = None if stop_after is None else time.perf_counter() + stop_after
+    while run.step < config.steps:
+        if deadline is not None and time.perf_counter() > deadline:
+            run.save_checkpoint()
+            break
+        state = training_moments(config, run.step, run.rng)
+        game = CoalitionGame(state, state.base_routes())
+        behaviour = _Behaviour(run, state, on_step)
+        start_J, began = game.cost, run.step
+        stop = game.run(behaviour, np.random.default_rng(run.rng.integers(2**63)),
+                        k_max=min(config.episode_steps, config.steps - run.step),
+                        c_max=C_MAX)
+        run.episode += 1
+        run.log["episodes"].append({
+            "step": run.step, "decisions": run.step - began, "J_start": start_J,
+            "J_end": game.cost, "stop": stop, "time": state.time,
+            "scale": state.instance.scale, "committed": sum(map(len, state.committed))})
+        if run.step >= next_checkpoint or run.step >= config.steps:
+            run.save_checkpoint()
+            next_checkpoint = (run.step // config.checkpoint_every + 1) * config.checkpoint_every
 
 
 def plot_curve(summary: dict[str, Any], path: Path) -> None:
@@ -432,6 +757,7 @@ def plot_curve(summary: dict[str, Any], path: Path) -> None:
         steps = [u["step"] for u in updates]
         axes[1].semilogy(steps, [u["critic_loss"] for u in updates], label="critic loss")
         axes[1].semilogy(steps, [u["alpha"] for u in updates], label="alpha")
+        axes[1].semilogy(steps, [max(u["entropy"], 1e-4) for u in updates], label="entropy")
         axes[1].legend()
     axes[1].set(title="SAC", xlabel="env step")
     evals = summary["evals"]

@@ -16,12 +16,17 @@ from tsac_bench.planning.simulator import simulate
 from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.ocf.engine import (
     AGENT_FEATURES,
+    C_MAX,
     DEPOT_FEATURES,
+    INIT,
+    K_MAX,
+    PASS,
     STRICT_DECREASE,
     TASK_FEATURES,
     CoalitionGame,
     DecisionView,
     Move,
+    sample_rng,
 )
 from tsac_bench.solvers.ocf.hocf import HeuristicSelection
 from tsac_bench.solvers.ocf.rocf import UniformSelection
@@ -298,3 +303,60 @@ def test_an_accepted_move_forgets_exactly_the_rejections_it_may_have_changed():
     for k in range(instance.n_aavs):
         assert game.rejected[k] == (set() if k in stale else everything - changed)
     assert changed and any(k not in stale for k in range(instance.n_aavs))
+
+
+@pytest.mark.parametrize("method", ["rocf", "hocf"])
+def test_samples_return_the_best_of_k_games_each_with_its_own_stream(method):
+    state = PlanningState.static(generate("8/20", seed=4))
+    allocator = make_allocator(method)
+    assert (allocator.init, allocator.samples) == (INIT, 1) == ("empty", 1)
+    singles = []
+    for k in range(3):
+        game = CoalitionGame(state, state.base_routes())
+        game.run(allocator.rule(state), sample_rng(11, k), k_max=K_MAX, c_max=C_MAX)
+        singles.append(game)
+    best = make_allocator(method, samples=3).plan(state, seed=11)
+    assert best.stats["sample_J"] == [g.cost for g in singles]
+    winner = singles[best.stats["sample"]]
+    assert best.cost == min(g.cost for g in singles) and best.routes == winner.plan.routes
+    # One sample is the plain game seeded with the call's seed; repeats give the same plan.
+    assert allocator.plan(state, seed=11).routes == singles[0].plan.routes
+    assert make_allocator(method, samples=3).plan(state, seed=11).routes == best.routes
+    if method == "rocf":  # random selection: the streams differ, so do the games
+        assert len(set(best.stats["sample_J"])) > 1
+    with pytest.raises(ValueError, match="samples"):
+        make_allocator(method, samples=0)
+
+
+def test_a_pass_changes_nothing_and_is_allowed_once_per_structure():
+    state = PlanningState.static(generate("4/10", seed=3))
+    game = CoalitionGame(state)
+    game.run(UniformSelection(), np.random.default_rng(0), k_max=5, c_max=10**6)
+    game.rejected[0].add(game.valid_tasks(0)[0])
+    before = (game.plan.routes, game.cost, game.key, set(game.tabu),
+              [set(r) for r in game.rejected], len(game.trajectory))
+    assert game.can_pass(0)
+    game.pass_turn(0)
+    assert (game.plan.routes, game.cost, game.key, set(game.tabu),
+            [set(r) for r in game.rejected], len(game.trajectory)) == before
+    assert game.decisions[-1][1:5] == (0, PASS, "pass", False)
+    assert not game.can_pass(0) and game.can_pass(1)
+    with pytest.raises(ValueError, match="already passed"):
+        game.pass_turn(0)
+    # Any accepted move changes the structure: AAV 0 may pass again.
+    move = next(mv for n in range(game.n_aavs) for m in game.candidates(n)
+                if (mv := game.move(n, m)) is not None and game.acceptable(mv))
+    game._apply(move)
+    assert game.can_pass(0)
+
+
+def test_a_rule_that_passes_whenever_it_may_still_ends_nash_stable():
+    class Shy:
+        def select(self, view, rng):
+            return PASS if view.can_pass else UniformSelection().select(view, rng)
+
+    for instance in small_instances():
+        game = CoalitionGame(PlanningState.static(instance))
+        stop = game.run(Shy(), np.random.default_rng(2), k_max=10**6, c_max=10**6)
+        assert stop == "stable" and improving_moves(game) == [], instance.name
+        assert any(d.op == "pass" for d in game.decisions)

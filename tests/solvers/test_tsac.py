@@ -12,16 +12,30 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("gymnasium")
 
+from tsac_bench.model.evaluator import CostEvaluator  # noqa: E402
 from tsac_bench.model.generator import generate  # noqa: E402
-from tsac_bench.planning import PlanningState  # noqa: E402
+from tsac_bench.planning import PlanningState, make_allocator  # noqa: E402
 from tsac_bench.planning.solve import solve  # noqa: E402
-from tsac_bench.solvers.ocf.engine import CoalitionGame, DecisionView  # noqa: E402
+from tsac_bench.solvers.ocf.engine import (  # noqa: E402
+    C_MAX,
+    COMPETITION_FEATURES,
+    K_MAX,
+    CoalitionGame,
+    DecisionView,
+    sample_rng,
+)
+from tsac_bench.solvers.ocf.hocf import HeuristicSelection  # noqa: E402
 from tsac_bench.solvers.tsac.env import (  # noqa: E402
     AGENT_DIM,
+    COMPETITION_SCALE,
     DEPOT_DIM,
+    FEATURE_SETS,
     TASK_DIM,
     Observation,
     TaskSelectionEnv,
+    observe,
+    pad,
+    replan_moments,
     unpad,
 )
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate  # noqa: E402
@@ -30,6 +44,7 @@ from tsac_bench.solvers.tsac.policy import (  # noqa: E402
     PolicyFileError,
     PolicySelection,
     load_policy,
+    save_policy,
 )
 from tsac_bench.solvers.tsac.sac import (  # noqa: E402
     Batch,
@@ -37,6 +52,7 @@ from tsac_bench.solvers.tsac.sac import (  # noqa: E402
     SACConfig,
     TrainConfig,
     Transition,
+    rollout_values,
     train,
 )
 
@@ -175,7 +191,7 @@ def test_a_few_hundred_updates_lower_the_critic_loss():
 def test_training_writes_a_policy_and_resumes_from_its_checkpoint(tmp_path):
     config = TrainConfig(steps=40, warmup=20, pretrain_updates=5, eval_every=40,
                          eval_scale="4/10", eval_instances=1, checkpoint_every=20,
-                         curriculum=((0.0, ("4/10",)),), net=SMALL)
+                         curriculum=((0.0, ("4/10",)),), net=SMALL, signal="td", features=1)
     first = train(tmp_path, config, device="cpu")
     assert first["steps"] == 40 and len(first["evals"]) == 1
     assert isinstance(load_policy(tmp_path / "policy.pt"), PolicyNet)
@@ -219,3 +235,192 @@ def test_zero_temperature_takes_the_most_probable_task():
     greedy = PolicySelection(actor, temperature=0.0).probabilities(view)
     assert greedy.sum() == 1.0 and greedy[int(np.argmax(sampled))] == 1.0
     assert set(np.flatnonzero(sampled)) <= {game.visible.index(m) for m in view.candidates}
+
+
+def test_every_ocf_method_starts_alike_by_default():
+    shared = ("init", "samples", "k_max", "c_max")
+    settings = [make_allocator(m).settings() for m in ("hocf", "rocf", "tsac-ocf")]
+    assert {tuple(s[k] for k in shared) for s in settings} == {("empty", 1, 200_000, 5_000)}
+
+
+V2 = FEATURE_SETS[2]
+SMALL_V2 = NetConfig(AGENT_DIM, V2.task_dim, DEPOT_DIM, d_model=16, heads=2, layers=2,
+                     feedforward=32, features=2, pass_action=True)
+
+
+def mid_game(scale="8/20", seed=3, decisions=15):
+    """A game a few HOCF decisions in, and the view of the next AAV with candidates."""
+    state = PlanningState.static(generate(scale, seed))
+    game = CoalitionGame(state)
+    game.run(HeuristicSelection(state.instance, 1.0, 2.0, 1.0), np.random.default_rng(0),
+             k_max=decisions, c_max=C_MAX)
+    n = next(n for n in range(game.n_aavs) if len(game.candidates(n)) > 2)
+    return game, DecisionView(game, n, game.candidates(n))
+
+
+def test_feature_set_2_adds_scaled_competition_columns_and_leads_with_the_pass():
+    game, view = mid_game()
+    old, new = observe(view, FEATURE_SETS[1]), observe(view, V2)
+    assert new.tasks.shape == (len(game.visible), V2.task_dim) == (len(game.visible), 25)
+    np.testing.assert_array_equal(new.tasks[:, :TASK_DIM], old.tasks)
+    raw = view.competition_features()
+    divisor = np.array([COMPETITION_SCALE[c] for c in COMPETITION_FEATURES])
+    np.testing.assert_allclose(new.tasks[:, TASK_DIM:], raw / divisor, rtol=1e-6)
+    # By hand for one task: the nearest other AAV, the others' reach, the detour costs.
+    i = 0
+    m = game.visible[i]
+    others = [k for k in range(game.n_aavs) if k != view.aav]
+    nearest = {k: min(game.instance.dist[v, m] for v in
+                      [game.anchor(k).node, *(x.node for x in game.route(k)[game.first_free[k]:])])
+               for k in range(game.n_aavs)}
+    assert raw[i, 0] == pytest.approx(min(nearest[k] for k in others) / 1000)
+    rate = [game.instance.weights[2] * a.alpha / 1000 / game.instance.e_base
+            for a in game.instance.aavs]
+    assert raw[i, 3] == pytest.approx(min(2 * nearest[k] * rate[k] for k in others))
+    assert raw[i, 4] == pytest.approx(2 * nearest[view.aav] * rate[view.aav])
+    assert 0.0 <= raw[i, 2] <= 1.0
+    # The action rows: pass first, then the candidate tasks; the pass token is the depot
+    # row nearest to the anchor.
+    assert new.action_mask[0] and (new.action_mask[1:] == old.action_mask).all()
+    nearest_depot = np.argmin(new.depots[:, 2])
+    np.testing.assert_array_equal(new.pass_token, new.depots[nearest_depot])
+    game.pass_turn(view.aav)
+    assert not observe(view, V2).action_mask[0]  # a second pass under this structure
+    # The per-structure cache: after more accepted moves the columns are those of a game
+    # built afresh on the same routes.
+    game.run(HeuristicSelection(game.instance, 1.0, 2.0, 1.0), np.random.default_rng(1),
+             k_max=len(game.decisions) + 20, c_max=C_MAX)
+    assert len(game.trajectory) > 1
+    n = next(n for n in range(game.n_aavs) if game.candidates(n))
+    fresh = CoalitionGame(game.state, game.plan.routes)
+    np.testing.assert_array_equal(
+        DecisionView(game, n, game.candidates(n)).competition_features(),
+        DecisionView(fresh, n, game.candidates(n)).competition_features())
+
+
+def test_padding_never_changes_the_real_tokens_with_competition_and_pass():
+    torch.manual_seed(0)
+    actor = PolicyNet(SMALL_V2).eval()
+    _, view = mid_game()
+    state = observe(view, V2)
+    _, other_view = mid_game("16/40", seed=5)
+    longer = observe(other_view, V2)
+    assert len(longer.tasks) > len(state.tasks)
+    alone = actor(collate([state]))[0]
+    batch = collate([longer, state])
+    assert batch["tasks"].shape[-1] == V2.task_dim
+    assert not batch["tasks"][1, len(state.tasks):].any()  # zero-padded rows
+    padded = actor(batch)[1]
+    width = 1 + len(state.tasks)
+    torch.testing.assert_close(padded[:width], alone)
+    assert torch.isneginf(padded[width:]).all()
+    # The Gymnasium form pads the same way and round-trips.
+    gym_form = pad(state, 80, 8)
+    assert gym_form["tasks"].shape == (80, V2.task_dim) and not gym_form["tasks"][
+        len(state.tasks):].any()
+    back = unpad(gym_form)
+    np.testing.assert_array_equal(back.action_mask, state.action_mask)
+    np.testing.assert_array_equal(back.pass_token, state.pass_token)
+
+
+def test_the_environment_with_feature_set_2_passes_and_ends_stable():
+    env = TaskSelectionEnv(("4/10",), max_tasks=10, max_depots=2, features=2)
+    obs, _ = env.reset(seed=5)
+    assert env.observation_space.contains(obs) and obs["action_mask"][0] == 1
+    before = env.game.plan.routes
+    obs, reward, terminated, _, _ = env.step(0)
+    assert reward == 0.0 and env.game.plan.routes == before and not terminated
+    assert env.game.decisions[-1].op == "pass"
+    rng = np.random.default_rng(1)
+    done = False
+    while not done:
+        obs, _, terminated, truncated, _ = env.step(
+            int(rng.choice(np.flatnonzero(obs["action_mask"]))))
+        done = terminated or truncated
+    assert terminated and not obs["action_mask"].any()
+
+
+def test_a_rollout_label_is_the_J_of_replaying_the_action_and_its_completion():
+    game, view = mid_game()
+    completion = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
+    actions = [0, *np.flatnonzero(observe(view, V2).action_mask[1:])[:3] + 1]
+    before = (game.plan.routes, len(game.decisions), set(game.tabu))
+    values = rollout_values(game, view, actions, V2, completion, rollouts=2, seed=7)
+    assert (game.plan.routes, len(game.decisions), set(game.tabu)) == before  # forks only
+    for i, action in enumerate(actions):
+        for r in range(2):
+            replay = game.fork()
+            if action == 0:
+                replay.pass_turn(view.aav)
+            else:
+                replay.decide(view.aav, game.visible[action - 1])
+            replay.run(completion, sample_rng(7, r), k_max=K_MAX, c_max=C_MAX)
+            assert values[i, r] == replay.cost
+            assert replay.cost == pytest.approx(
+                CostEvaluator(game.instance).cost(replay.plan.routes), rel=1e-12)
+    # The pass label is HOCF finishing the game from this very structure.
+    plain = game.fork()
+    plain.run(completion, sample_rng(7, 1), k_max=K_MAX, c_max=C_MAX)
+    assert values[0, 1] == plain.cost
+
+
+def test_policy_files_name_their_feature_set(tmp_path):
+    assert load_policy().config.features == 1  # the shipped file predates feature set 2
+    torch.manual_seed(1)
+    actor = PolicyNet(SMALL_V2)
+    save_policy(actor, tmp_path / "v2.pt", {})
+    loaded = load_policy(tmp_path / "v2.pt")
+    assert loaded.config.features == 2 and loaded.config.pass_action
+    # A file whose network does not fit its feature set is refused with the reason.
+    payload = torch.load(tmp_path / "v2.pt", weights_only=True)
+    payload["config"]["features"] = 1
+    torch.save(payload, tmp_path / "mixed.pt")
+    with pytest.raises(PolicyFileError, match="do not fit feature set 1"):
+        load_policy(tmp_path / "mixed.pt")
+    payload["config"]["features"] = 9
+    torch.save(payload, tmp_path / "future.pt")
+    with pytest.raises(PolicyFileError, match="feature set 9 is unknown"):
+        load_policy(tmp_path / "future.pt")
+    # Same seed, same plan, with the pass in play and best of 2 games.
+    instance = generate("8/20", 4)
+    settings = {"policy": str(tmp_path / "v2.pt"), "samples": 2}
+    runs = [solve(instance, "tsac-ocf", seed=9, mode="dynamic", settings=settings)
+            for _ in range(2)]
+    assert runs[0].solution.routes == runs[1].solution.routes
+    assert runs[0].evaluation.feasible and runs[0].claim_matches
+
+
+def test_rollout_training_writes_a_feature_set_2_policy_and_resumes(tmp_path):
+    config = TrainConfig(steps=50, warmup=20, pretrain_updates=3, eval_every=50,
+                         eval_scale="4/10", eval_instances=1, checkpoint_every=25,
+                         curriculum=((0.0, ("4/10",)),), net=SMALL_V2, label_share=0.3,
+                         label_candidates=3, rollouts=1, replan_share=0.5)
+    first = train(tmp_path, config, device="cpu")
+    assert first["steps"] == 50 and first["labels"] and first["updates"]
+    assert load_policy(tmp_path / "policy.pt").config.features == 2
+    assert [config.clone_weight_at(s) for s in (20, 35, 50)] == [2.0, 1.0, 0.0]
+    # A call that runs out of its time stops at an episode's end with a checkpoint.
+    paused = train(tmp_path, TrainConfig(steps=70), device="cpu",
+                   resume=tmp_path / "checkpoint.pt", stop_after=1e-9)
+    assert paused["steps"] == 50
+    more = train(tmp_path, TrainConfig(steps=70), device="cpu",
+                 resume=tmp_path / "checkpoint.pt")
+    assert more["steps"] == 70 and more["config"]["net"]["d_model"] == SMALL_V2.d_model
+
+
+def test_replan_moments_are_the_states_of_simulated_dynamic_runs():
+    sample = replan_moments(("6/15",))
+    rng = np.random.default_rng(4)
+    moments = [sample(rng) for _ in range(12)]
+    later = [s for s in moments if s.time > 0]
+    assert later and any(any(p) for s in later for p in s.committed)
+    assert any(s.time == 0 for s in moments)
+    for state in moments:
+        assert state.visible <= state.instance.released_by(state.time)
+        game = CoalitionGame(state, state.base_routes())
+        game.run(PolicySelection(load_policy()), np.random.default_rng(0), k_max=K_MAX,
+                 c_max=C_MAX)
+        assert state.violations(game.plan.routes) == []
+    again = replan_moments(("6/15",))(np.random.default_rng(4))
+    assert (again.instance.name, again.time, again.visible) == (
+        moments[0].instance.name, moments[0].time, moments[0].visible)

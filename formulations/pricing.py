@@ -32,6 +32,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from tsac_bench.evaluator import TIME_TOLERANCE
 from tsac_bench.formulations.network import DIRECT, START, AavNetwork
 from tsac_bench.model import Instance, Route, Visit
@@ -87,19 +89,33 @@ class Schedule:
 
 
 class _Label:
-    __slots__ = ("alive", "amount", "arc", "clock", "cost", "flown", "loaded", "node", "parent",
-                 "peak", "pickup", "visited")
+    __slots__ = ("alive", "arc", "choice", "clock", "flown", "loaded", "node", "parent",
+                 "table", "visited")
 
-    def __init__(self, node, clock, flown, visited, peak, pickup, loaded, cost, parent, arc,
-                 amount):
+    def __init__(self, node, clock, flown, visited, loaded, table, choice, parent, arc):
         self.node, self.clock, self.flown, self.visited = node, clock, flown, visited
-        self.peak, self.pickup, self.loaded, self.cost = peak, pickup, loaded, cost
-        self.parent, self.arc, self.amount = parent, arc, amount
+        self.loaded, self.table, self.choice = loaded, table, choice
+        self.parent, self.arc = parent, arc
         self.alive = True
+
+    @property
+    def cost(self) -> float:
+        return float(self.table[-1, -1])
 
 
 class Pricer:
-    """Labelling for one AAV over its network (formulations/network.py)."""
+    """Labelling for one AAV over its network (formulations/network.py).
+
+    The amounts are not fixed in a label: its ``table[x, y]`` is the least reduced cost of
+    its path over all amount choices whose current trip needs peak <= x and carries pickup
+    goods <= y (x, y in 0..B). A visit with price ``cover`` per kg and amounts lo..hi maps it
+    by min over the amount (a delivery needs peak - a before it, a pickup needs pickup
+    min(x, y) - a: its goods count in the peak too); a depot visit collapses it to its
+    least value (a new trip needs nothing of the old one). So one label stands for every
+    amount vector of its path, and label L1 dominates L2 only if table1 <= table2 everywhere
+    (with the other resources as above); the reduced cost of a finished schedule is
+    table[B, B]. ``choice`` keeps the minimising amount per cell, to read the amounts back.
+    """
 
     def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: Anchor,
                  timed: frozenset[int]) -> None:
@@ -132,6 +148,34 @@ class Pricer:
         self.demand = {j: instance.tasks[j].demand for j in network.tasks}
         self.delivery = {j: instance.tasks[j].is_delivery for j in network.tasks}
         self.horizon = float(instance.horizon)
+        cells = np.arange(self.capacity + 1)
+        self._rows = cells[:, None].repeat(self.capacity + 1, axis=1)
+        self._smaller = np.minimum.outer(cells, cells)
+
+    def _root_table(self, base: float) -> np.ndarray:
+        table = np.full((self.capacity + 1, self.capacity + 1), np.inf)
+        table[self.anchor.peak:, self.anchor.pickup:] = base
+        return table
+
+    def _visit(self, table: np.ndarray, delivery: bool, price: float, low: int, high: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """(new table, amount chosen per cell) of a visit with amounts low..high."""
+        size = self.capacity + 1
+        out = np.full((size, size), np.inf)
+        choice = np.zeros((size, size), np.int16)
+        for amount in range(low, high + 1):
+            value = -price * amount
+            if delivery:
+                candidate = np.full((size, size), np.inf)
+                candidate[amount:, :] = table[:size - amount, :] + value
+            else:
+                shifted = np.full((size, size), np.inf)
+                shifted[:, amount:] = table[:, :size - amount] + value
+                candidate = shifted[self._rows, self._smaller]
+            better = candidate < out
+            out[better] = candidate[better]
+            choice[better] = amount
+        return out, choice
 
     def price(self, prices: TaskPrices, restrictions: Restrictions, *, limit: int = 50,
               label_cap: int | None = None) -> tuple[float, list[Schedule]]:
@@ -139,8 +183,8 @@ class Pricer:
         first). With ``label_cap`` only the cheapest labels per node and length are kept: a
         heuristic whose least reduced cost is then not a bound."""
         anchor = self.anchor
-        root = _Label(anchor.node, anchor.clock, anchor.flown, anchor.visited, anchor.peak,
-                      anchor.pickup, anchor.loaded, prices.base, None, None, 0)
+        root = _Label(anchor.node, anchor.clock, anchor.flown, anchor.visited, anchor.loaded,
+                      self._root_table(prices.base), None, None, None)
         best = [root]
         buckets: dict[int, list[_Label]] = {}
         frontier = [root]
@@ -167,12 +211,12 @@ class Pricer:
                     clock, flown = label.clock, label.flown
                     flown += leg1
                     clock += leg1 / speed
-                    if leg2 is None:
-                        peak, pickup, loaded, leg = label.peak, label.pickup, label.loaded, leg1
-                    else:
+                    table, loaded, leg = label.table, label.loaded, leg1
+                    if leg2 is not None:
                         flown += leg2
                         clock += leg2 / speed
-                        peak, pickup, loaded, leg = 0, 0, True, leg2
+                        table = np.full_like(table, table[-1, -1])
+                        loaded, leg = True, leg2
                     if clock < t_start[j]:
                         clock = t_start[j]
                     if clock > t_end[j]:
@@ -180,37 +224,34 @@ class Pricer:
                     is_delivery = self.delivery[j]
                     if is_delivery and not loaded:
                         continue
-                    cost = label.cost + (per_metre * leg if flown <= max_range else full)
+                    cost = per_metre * leg if flown <= max_range else full
                     cost -= visit_bonus.get(j, 0.0) + arc_bonus.get(arc[:3], 0.0)
                     if j in timed:
                         theta = (clock - t_start[j]) / horizon
                         cost += aav_time.get(j, 0.0) * theta
                         cost += min(0.0, closer_time.get(j, 0.0) * theta - closer.get(j, 0.0))
-                    room = capacity - peak if is_delivery else capacity - pickup
                     a_low = low.get(j, 1)
-                    a_high = min(room, self.demand[j], capacity, high.get(j, capacity))
+                    a_high = min(self.demand[j], capacity, high.get(j, capacity))
                     price = cover.get(j, 0.0)
                     # With no value on goods, more than the least amount only uses capacity.
                     if price <= 0.0:
                         a_high = min(a_high, a_low)
-                    for amount in range(a_low, a_high + 1):
-                        if is_delivery:
-                            new_peak, new_pickup = peak + amount, pickup
-                        else:
-                            new_pickup = pickup + amount
-                            new_peak = max(peak, new_pickup)
-                        child = _Label(j, clock, flown, label.visited | bit, new_peak,
-                                       new_pickup, loaded, cost - price * amount, label, arc,
-                                       amount)
-                        if self._insert(buckets.setdefault(j, []), child):
-                            produced.append(child)
+                    if a_high < a_low:
+                        continue
+                    new_table, choice = self._visit(table, is_delivery, price, a_low, a_high)
+                    if not np.isfinite(new_table[-1, -1]):
+                        continue
+                    new_table += cost
+                    child = _Label(j, clock, flown, label.visited | bit, loaded, new_table,
+                                   choice, label, arc)
+                    if self._insert(buckets.setdefault(j, []), child):
+                        produced.append(child)
             if label_cap is not None:
                 produced = self._cap(produced, label_cap)
             frontier = produced
             best.extend(produced)
-        alive = sorted((lab for lab in best if lab.alive or lab is root),
-                       key=lambda lab: lab.cost)
         least = min(lab.cost for lab in best)
+        alive = sorted((lab for lab in best if lab.alive), key=lambda lab: lab.cost)
         chosen, seen = [], set()
         for lab in alive:
             if lab.cost >= -1e-9 or len(chosen) >= limit:
@@ -236,13 +277,13 @@ class Pricer:
         return kept
 
     def _dominates(self, a: _Label, b: _Label) -> bool:
-        if not (a.cost <= b.cost and a.clock <= b.clock and a.peak <= b.peak
-                and a.pickup <= b.pickup and (a.loaded or not b.loaded)
+        if not (a.clock <= b.clock and (a.loaded or not b.loaded)
                 and a.visited & b.visited == a.visited):
             return False
-        if a.flown > self.max_range and b.flown > self.max_range:
-            return True
-        return a.flown <= b.flown if self.dcum_monotone else a.flown == b.flown
+        if not (a.flown > self.max_range and b.flown > self.max_range) and not (
+                a.flown <= b.flown if self.dcum_monotone else a.flown == b.flown):
+            return False
+        return bool((a.table <= b.table).all())
 
     def _insert(self, bucket: list[_Label], child: _Label) -> bool:
         for other in bucket:
@@ -256,17 +297,30 @@ class Pricer:
         return True
 
     def _tail(self, label: _Label) -> tuple[Visit, ...]:
+        """The free visits of a finished label, amounts read back from the cell (B, B)."""
         steps = []
         while label.parent is not None:
             steps.append(label)
             label = label.parent
+        x = y = self.capacity
+        amounts = []
+        for lab in steps:  # last visit first
+            a = int(lab.choice[x, y])
+            amounts.append(a)
+            if self.delivery[lab.node]:
+                x -= a
+            else:
+                x, y = x, min(x, y) - a
+            if lab.arc[4] is not None:  # the trip began at a depot: the parent's full cell
+                x = y = self.capacity
         steps.reverse()
+        amounts.reverse()
         visits: list[Visit] = []
-        for k, lab in enumerate(steps):
+        for k, (lab, a) in enumerate(zip(steps, amounts, strict=True)):
             mode = lab.arc[2]
             if mode != DIRECT and not (k == 0 and self.anchor.skip_depot_visit):
                 visits.append(Visit(mode))
-            visits.append(Visit(lab.node, lab.amount))
+            visits.append(Visit(lab.node, a))
         return tuple(visits)
 
 

@@ -89,13 +89,13 @@ class Schedule:
 
 
 class _Label:
-    __slots__ = ("alive", "arc", "choice", "clock", "flown", "loaded", "node", "parent",
+    __slots__ = ("alive", "amounts", "arc", "clock", "flown", "loaded", "node", "parent", "price",
                  "table", "visited")
 
-    def __init__(self, node, clock, flown, visited, loaded, table, choice, parent, arc):
+    def __init__(self, node, clock, flown, visited, loaded, table, parent, arc, price, amounts):
         self.node, self.clock, self.flown, self.visited = node, clock, flown, visited
-        self.loaded, self.table, self.choice = loaded, table, choice
-        self.parent, self.arc = parent, arc
+        self.loaded, self.table = loaded, table
+        self.parent, self.arc, self.price, self.amounts = parent, arc, price, amounts
         self.alive = True
 
     @property
@@ -114,7 +114,7 @@ class Pricer:
     least value (a new trip needs nothing of the old one). So one label stands for every
     amount vector of its path, and label L1 dominates L2 only if table1 <= table2 everywhere
     (with the other resources as above); the reduced cost of a finished schedule is
-    table[B, B]. ``choice`` keeps the minimising amount per cell, to read the amounts back.
+    table[B, B]; the amounts are read back cell by cell from the parents' tables.
     """
 
     def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: Anchor,
@@ -158,24 +158,29 @@ class Pricer:
         return table
 
     def _visit(self, table: np.ndarray, delivery: bool, price: float, low: int, high: int
-               ) -> tuple[np.ndarray, np.ndarray]:
-        """(new table, amount chosen per cell) of a visit with amounts low..high."""
+               ) -> np.ndarray:
+        """The table after a visit with amounts low..high at ``price`` per kg.
+
+        min over a of T(c - a) - price * a is a sliding-window minimum of T(z) + price * z
+        (window c - high .. c - low) less price * c, taken along the peak axis for a delivery
+        and along the pickup axis for a pickup (whose goods also raise the peak: the pickup
+        cell used is min(x, y))."""
         size = self.capacity + 1
-        out = np.full((size, size), np.inf)
-        choice = np.zeros((size, size), np.int16)
-        for amount in range(low, high + 1):
-            value = -price * amount
-            if delivery:
-                candidate = np.full((size, size), np.inf)
-                candidate[amount:, :] = table[:size - amount, :] + value
-            else:
-                shifted = np.full((size, size), np.inf)
-                shifted[:, amount:] = table[:, :size - amount] + value
-                candidate = shifted[self._rows, self._smaller]
-            better = candidate < out
-            out[better] = candidate[better]
-            choice[better] = amount
-        return out, choice
+        axis = 0 if delivery else 1
+        cells = np.arange(size, dtype=float)
+        ramp = price * (cells[:, None] if delivery else cells[None, :])
+        shifted = table + ramp
+        pad_shape = (high, size) if delivery else (size, high)
+        window = np.concatenate([np.full(pad_shape, np.inf), shifted], axis=axis)
+        length, span = high - low + 1, 1
+        while 2 * span <= length:
+            window = np.minimum(_take(window, 0, -span, axis), _take(window, span, None, axis))
+            span *= 2
+        out = np.minimum(_take(window, 0, size, axis),
+                         _take(window, length - span, length - span + size, axis)) - ramp
+        if not delivery:
+            out = out[self._rows, self._smaller]
+        return out
 
     def price(self, prices: TaskPrices, restrictions: Restrictions, *, limit: int = 50,
               label_cap: int | None = None) -> tuple[float, list[Schedule]]:
@@ -184,7 +189,7 @@ class Pricer:
         heuristic whose least reduced cost is then not a bound."""
         anchor = self.anchor
         root = _Label(anchor.node, anchor.clock, anchor.flown, anchor.visited, anchor.loaded,
-                      self._root_table(prices.base), None, None, None)
+                      self._root_table(prices.base), None, None, 0.0, (0, 0))
         best = [root]
         buckets: dict[int, list[_Label]] = {}
         frontier = [root]
@@ -238,12 +243,12 @@ class Pricer:
                         a_high = min(a_high, a_low)
                     if a_high < a_low:
                         continue
-                    new_table, choice = self._visit(table, is_delivery, price, a_low, a_high)
+                    new_table = self._visit(table, is_delivery, price, a_low, a_high)
                     if not np.isfinite(new_table[-1, -1]):
                         continue
                     new_table += cost
                     child = _Label(j, clock, flown, label.visited | bit, loaded, new_table,
-                                   choice, label, arc)
+                                   label, arc, price, (a_low, a_high))
                     if self._insert(buckets.setdefault(j, []), child):
                         produced.append(child)
             if label_cap is not None:
@@ -297,7 +302,8 @@ class Pricer:
         return True
 
     def _tail(self, label: _Label) -> tuple[Visit, ...]:
-        """The free visits of a finished label, amounts read back from the cell (B, B)."""
+        """The free visits of a finished label, amounts read back from the cell (B, B): at
+        each visit the amount that attains the cell's minimum in the parent's table."""
         steps = []
         while label.parent is not None:
             steps.append(label)
@@ -305,13 +311,23 @@ class Pricer:
         x = y = self.capacity
         amounts = []
         for lab in steps:  # last visit first
-            a = int(lab.choice[x, y])
-            amounts.append(a)
+            before = lab.parent.table
+            if lab.arc[4] is not None:  # through a depot: the parent's trip is closed
+                before = np.full_like(before, before[-1, -1])
+            low, high = lab.amounts
             if self.delivery[lab.node]:
+                options = [(before[x - a, y] - lab.price * a, a) for a in range(low, high + 1)
+                           if x - a >= 0]
+                a = min(options)[1]
                 x -= a
             else:
-                x, y = x, min(x, y) - a
-            if lab.arc[4] is not None:  # the trip began at a depot: the parent's full cell
+                z = min(x, y)
+                options = [(before[x, z - a] - lab.price * a, a) for a in range(low, high + 1)
+                           if z - a >= 0]
+                a = min(options)[1]
+                y = z - a
+            amounts.append(a)
+            if lab.arc[4] is not None:
                 x = y = self.capacity
         steps.reverse()
         amounts.reverse()
@@ -322,6 +338,10 @@ class Pricer:
                 visits.append(Visit(mode))
             visits.append(Visit(lab.node, a))
         return tuple(visits)
+
+
+def _take(array: np.ndarray, start: int, stop: int | None, axis: int) -> np.ndarray:
+    return array[start:stop] if axis == 0 else array[:, start:stop]
 
 
 def anchor_of(instance: Instance, n: int, prefix: Route, trailing_depot: int | None,

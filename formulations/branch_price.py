@@ -13,7 +13,9 @@ visits a "closer" z_cm in [0, lambda_c]:
        sum_c z_cm + nobody_m >= 1                                (each task has one closer)
        Ctime_m - sum_c theta_cm z_cm - nobody_m >= 0             (the closer's arrival)
        Ctime_m - sum_{c of k} theta_cm lambda_c - nobody_m >= 0  (every member's arrival)
-       lambda_c - z_cm >= 0.
+       lambda_c - z_cm >= 0,
+       sum_{n in S} coef_n x_nm - covered_m >= -rest  (coalition cover cuts, as in the MILP:
+                                                      x_nm = sum of n's columns visiting m).
 At a point with one column per AAV this is J exactly: covered = min(R, on-time goods); the
 per-AAV rows make Ctime at least the latest arrival, the closer (the latest member) makes it
 no more; nobody = 1 exactly when no column visits m, which costs C_time = 1. Tasks whose
@@ -53,6 +55,7 @@ from tsac_bench.formulations.network import (
     DIRECT,
     aav_network,
     canonical_routes,
+    coalition_cover_cuts,
     late_committed,
     parse_prefix,
     prefix_arrivals,
@@ -113,7 +116,8 @@ class BranchPrice:
 
     def __init__(self, instance: Instance, tasks: Sequence[int] | None = None,
                  committed: Sequence[Route] | None = None, *, heuristic_cap: int = 3,
-                 columns_per_aav: int = 30, closer_rows: bool = True) -> None:
+                 columns_per_aav: int = 30, closer_rows: bool = True,
+                 cover_cuts: bool = True, threads: int = 1) -> None:
         import highspy
 
         self.instance = instance
@@ -157,7 +161,7 @@ class BranchPrice:
         # --- the LP ----------------------------------------------------------------------
         h = highspy.Highs()
         h.setOptionValue("output_flag", False)
-        h.setOptionValue("threads", 1)
+        h.setOptionValue("threads", int(threads))
         self.h = h
         self.inf = highspy.kHighsInf
         self.n_cols = 0
@@ -168,9 +172,10 @@ class BranchPrice:
         self.closer_time = {m: self._row(0.0, self.inf) for m in self.timed}
         self.aav_time = {(k, m): self._row(0.0, self.inf) for k in range(n_aavs)
                          for m in self.pricers[k].network.tasks if m in self.timed}
+        self.covered = {}
         for m in self.tasks:
             demand = instance.tasks[m].demand
-            self._col(-w1 / demand, 0.0, demand, [(self.cover[m], -1.0)])
+            self.covered[m] = self._col(-w1 / demand, 0.0, demand, [(self.cover[m], -1.0)])
         for m in self.timed:
             ctime = [(self.closer_time[m], 1.0)] + [(r, 1.0) for (k, j), r in
                                                      self.aav_time.items() if j == m]
@@ -178,6 +183,23 @@ class BranchPrice:
             nobody = [(self.closer[m], 1.0), (self.closer_time[m], -1.0)] + [
                 (r, -1.0) for (k, j), r in self.aav_time.items() if j == m]
             self._col(0.0, 0.0, 1.0, nobody)
+        # Coalition cover cuts (network.coalition_cover_cuts): (row, task, {AAV: coef}).
+        self.cuts: list[tuple[int, int, dict[int, int]]] = []
+        if cover_cuts:
+            amount_cap = {}
+            for n, prefix in enumerate(self.prefixes):
+                for _, m, _, a in prefix.steps:
+                    amount_cap[n, m] = a
+            late_pairs = set(late)
+            for m in self.tasks:
+                demand = instance.tasks[m].demand
+                upper = {n: max(min(instance.aavs[n].capacity, demand), amount_cap.get((n, m), 0))
+                         for n in range(n_aavs) if m in self.pricers[n].network.tasks
+                         and (n, m) not in late_pairs}
+                for rest, coef in coalition_cover_cuts(upper, demand):
+                    row = self._row(-float(rest), self.inf)
+                    self.h.changeCoeff(row, self.covered[m], -1.0)
+                    self.cuts.append((row, m, coef))
         if not closer_rows:
             for m in self.timed:
                 h.changeRowBounds(self.closer[m], -self.inf, self.inf)
@@ -244,6 +266,8 @@ class BranchPrice:
         for key, (row, _) in self.robust.items():
             if _robust_matches(key, col):
                 entries.append((row, 1.0))
+        entries += [(row, float(coef[n])) for row, m, coef in self.cuts
+                    if n in coef and m in col.amounts]
         col.index = self._col(col.op, 0.0, self.inf, entries)
         for m, t in col.theta.items():
             z = self._col(0.0, 0.0, self.inf, [(self.closer[m], 1.0),
@@ -324,7 +348,12 @@ class BranchPrice:
         for (kind, k, key), (row, _) in self.robust.items():
             if k == n and duals[row] != 0.0:
                 (visit_bonus if kind == "visit" else arc_bonus)[key] = duals[row]
-        prices = TaskPrices(0.0, cover, aav_time, closer, closer_time, visit_bonus, arc_bonus)
+        cut_bonus: dict[int, float] = {}
+        for row, m, coef in self.cuts:
+            if n in coef and duals[row] != 0.0:
+                cut_bonus[m] = cut_bonus.get(m, 0.0) + coef[n] * duals[row]
+        prices = TaskPrices(0.0, cover, aav_time, closer, closer_time,
+                            visit_bonus=visit_bonus, arc_bonus=arc_bonus, cut_bonus=cut_bonus)
         prices.base = self.reduced_cost(self.by_key[n, ()], prices) - duals[self.conv[n]]
         return prices
 
@@ -336,6 +365,7 @@ class BranchPrice:
             rc += prices.aav_time.get(m, 0.0) * t
             rc += min(0.0, prices.closer_time.get(m, 0.0) * t - prices.closer.get(m, 0.0))
         rc -= sum(prices.visit_bonus.get(m, 0.0) for m in col.free_amounts)
+        rc -= sum(prices.cut_bonus.get(m, 0.0) for m in col.amounts)
         rc -= sum(prices.arc_bonus.get(a, 0.0) for a in col.arcs)
         return rc
 
@@ -433,6 +463,18 @@ class BranchPrice:
             routes.append(tuple(Visit(v.node, round(amount[n, v.node]))
                                 if v.node in cols[0].free_amounts else v for v in route))
         return tuple(routes)
+
+    def root(self, time_limit: float | None = None) -> dict[str, float]:
+        """The root LP by column generation alone (no incumbent, no branching): its value,
+        the Lagrangian bound, whether it converged, columns and seconds."""
+        began = time.perf_counter()
+        deadline = math.inf if time_limit is None else began + time_limit
+        clock = {"lp": 0.0, "pricing": 0.0}
+        value, bound, _, converged = self.column_generation(self.apply(()), math.inf,
+                                                            deadline, clock)
+        return {"lp": value, "bound": bound if not converged else value,
+                "converged": converged, "columns": len(self.columns),
+                "seconds": time.perf_counter() - began}
 
     # --- the search ----------------------------------------------------------------------
     def solve(self, incumbent: Sequence[Route], time_limit: float | None = None,

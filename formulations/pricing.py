@@ -43,7 +43,7 @@ from tsac_bench.model import Instance, Route, Visit
 class TaskPrices:
     """The duals one AAV's pricing sees. A visit to task m at arrival t with amount a adds
     op_cost - cover[m] * a + aav_time[m] * theta + min(0, closer_time[m] * theta - closer[m])
-    - visit_bonus[m] to the reduced cost, theta = (t - t_start) / horizon (time terms only for
+    - visit_bonus[m] - cut_bonus[m] to the reduced cost, theta = (t - t_start) / horizon (time terms only for
     tasks in ``timed``); each arc adds -arc_bonus[(tail, head, mode)]."""
 
     base: float  # reduced cost of the empty schedule (prefix only): -convexity dual + prefix
@@ -51,7 +51,8 @@ class TaskPrices:
     aav_time: dict[int, float]
     closer: dict[int, float]
     closer_time: dict[int, float]
-    visit_bonus: dict[int, float] = field(default_factory=dict)
+    visit_bonus: dict[int, float] = field(default_factory=dict)  # branching rows
+    cut_bonus: dict[int, float] = field(default_factory=dict)  # coalition cover cuts
     arc_bonus: dict[tuple[int, int, int], float] = field(default_factory=dict)
 
 
@@ -203,6 +204,7 @@ class Pricer:
         cover, aav_time = prices.cover, prices.aav_time
         closer, closer_time = prices.closer, prices.closer_time
         visit_bonus, arc_bonus = prices.visit_bonus, prices.arc_bonus
+        cut_bonus = prices.cut_bonus
         while frontier:
             produced: list[_Label] = []
             for label in frontier:
@@ -231,6 +233,7 @@ class Pricer:
                         continue
                     cost = per_metre * leg if flown <= max_range else full
                     cost -= visit_bonus.get(j, 0.0) + arc_bonus.get(arc[:3], 0.0)
+                    cost -= cut_bonus.get(j, 0.0)
                     if j in timed:
                         theta = (clock - t_start[j]) / horizon
                         cost += aav_time.get(j, 0.0) * theta

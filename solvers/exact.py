@@ -140,8 +140,10 @@ class BranchPriceAllocator(Settings):
 
     def __init__(self, time_limit: float | None = None, incumbent: str = "dga",
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
-                 closer_rows: bool = True) -> None:
+                 closer_rows: bool = True, cover_cuts: bool = True, threads: int = 1) -> None:
         self.time_limit = time_limit
+        self.threads = threads
+        self.cover_cuts = cover_cuts
         self.incumbent = incumbent
         self.heuristic_cap = heuristic_cap
         self.columns_per_aav = columns_per_aav
@@ -168,7 +170,8 @@ class BranchPriceAllocator(Settings):
             search = BranchPrice(instance, sorted(state.visible), state.committed,
                                  heuristic_cap=self.heuristic_cap,
                                  columns_per_aav=self.columns_per_aav,
-                                 closer_rows=self.closer_rows)
+                                 closer_rows=self.closer_rows, cover_cuts=self.cover_cuts,
+                                 threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)
@@ -177,7 +180,7 @@ class BranchPriceAllocator(Settings):
         stats.update(result.stats)
         # The master LPs are HiGHS's; the version recorded is highspy's.
         stats.update(objective=result.J, solver="branch-price", solver_version=_highs_version(),
-                     threads=1, seed=seed, wall_time=time.perf_counter() - began)
+                     threads=self.threads, seed=seed, wall_time=time.perf_counter() - began)
         return _checked(evaluator, result.routes, stats)
 
 

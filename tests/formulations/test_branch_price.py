@@ -89,7 +89,11 @@ def _random_prices(search: BranchPrice, n: int, rng: random.Random) -> TaskPrice
         cover={m: rng.choice([0.0, rng.uniform(0, 30)]) for m in tasks},
         aav_time={m: rng.uniform(0, 5) for m in tasks},
         closer={m: rng.uniform(0, 3) for m in tasks},
-        closer_time={m: rng.uniform(0, 5) for m in tasks})
+        closer_time={m: rng.uniform(0, 5) for m in tasks},
+        visit_bonus={m: rng.uniform(0, 1) for m in tasks if rng.random() < 0.5},
+        cut_bonus={m: rng.uniform(0, 2) for m in tasks if rng.random() < 0.5},
+        arc_bonus={(a.tail, a.head, a.mode): rng.uniform(0, 1)
+                   for a in search.pricers[n].network.arcs if rng.random() < 0.3})
     return prices
 
 

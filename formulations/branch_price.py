@@ -2,26 +2,25 @@
 in HiGHS (highspy), exact labelling pricing (formulations/pricing.py), best-bound branching.
 
 Master LP (docs/formulations.md, "exact-bp"). A column c of AAV k is a whole schedule from k's
-anchor (its committed prefix, then free visits, each trip from a depot, amounts fixed), with
-op_c = w3 * sum of its q_k(m) (Eq. 9, range overrun included), a_cm its on-time amount at task
-m and theta_cm = (t_cm - t_start(m)) / T_hor its arrival term. Variables lambda_c >= 0,
-covered_m in [0, R_m], Ctime_m >= 0, nobody_m in [0, 1], and for each column and task it
-visits a "closer" z_cm in [0, lambda_c]:
+anchor (its committed prefix, then free visits, each trip from a depot, amounts fixed) with a
+set S_c of the tasks it "closes", with op_c = w3 * sum of its q_k(m) (Eq. 9, range overrun
+included), a_cm its on-time amount at task m and theta_cm = (t_cm - t_start(m)) / T_hor its
+arrival term. Variables lambda_c >= 0, covered_m in [0, R_m], Ctime_m >= 0, nobody_m in [0, 1]:
   min  sum op_c lambda_c + sum_m w1 (1 - covered_m / R_m) + w2 Ctime_m
   s.t. sum_{c of k} lambda_c = 1                                 (convexity, per AAV)
        sum_c a_cm lambda_c - covered_m >= 0                      (coverage)
-       sum_c z_cm + nobody_m >= 1                                (each task has one closer)
-       Ctime_m - sum_c theta_cm z_cm - nobody_m >= 0             (the closer's arrival)
+       sum_{c: m in S_c} lambda_c + nobody_m >= 1                (each task has a closer)
+       Ctime_m - sum_{c: m in S_c} theta_cm lambda_c - nobody_m >= 0
        Ctime_m - sum_{c of k} theta_cm lambda_c - nobody_m >= 0  (every member's arrival)
-       lambda_c - z_cm >= 0,
        sum_{n in S} coef_n x_nm - covered_m >= -rest  (coalition cover cuts, as in the MILP:
                                                       x_nm = sum of n's columns visiting m).
-At a point with one column per AAV this is J exactly: covered = min(R, on-time goods); the
-per-AAV rows make Ctime at least the latest arrival, the closer (the latest member) makes it
-no more; nobody = 1 exactly when no column visits m, which costs C_time = 1. Tasks whose
-committed visit is late keep C_time = 1 as a constant.
-
-A new column enters with its z at their best, so its reduced cost is
+At a point with one column per AAV this is J exactly when the closer of each task is its
+latest member: covered = min(R, on-time goods); the per-AAV rows make Ctime at least the
+latest arrival, the closer no more; nobody = 1 exactly when no column closes m, which costs
+C_time = 1. Any other choice of closers only raises the objective, so the integer optimum is
+J*. Tasks whose committed visit is late keep C_time = 1 as a constant. The variants of one
+schedule with every subset S are the LP of "closer" variables z_cm in [0, lambda_c]; pricing
+picks the best S of a new schedule, so its reduced cost is
 op_c - dual(conv_k) + sum_m [-dual(cover_m) a_cm + dual(aav_km) theta_cm
                              + min(0, dual(closer_time_m) theta_cm - dual(closer_m))],
 the labelling's objective. With every AAV's least reduced cost rc_k (exact pricing), the
@@ -56,6 +55,7 @@ from tsac_bench.formulations.network import (
     aav_network,
     canonical_routes,
     coalition_cover_cuts,
+    identical_groups,
     late_committed,
     parse_prefix,
     prefix_arrivals,
@@ -89,8 +89,8 @@ class Column:
     theta: dict[int, float]  # arrival term per timed task visited on time
     free_amounts: dict[int, int]  # amount per free task visit (branching)
     arcs: frozenset[Arc3]  # free arcs (branching)
+    closes: frozenset[int] = frozenset()  # S_c: the timed tasks this column closes
     index: int = -1  # lambda's column in the LP
-    z: dict[int, int] = field(default_factory=dict)  # task -> z's column
 
 
 @dataclass(frozen=True)
@@ -117,7 +117,7 @@ class BranchPrice:
     def __init__(self, instance: Instance, tasks: Sequence[int] | None = None,
                  committed: Sequence[Route] | None = None, *, heuristic_cap: int = 3,
                  columns_per_aav: int = 30, closer_rows: bool = True,
-                 cover_cuts: bool = True, threads: int = 1) -> None:
+                 cover_cuts: bool = True, symmetry: bool = True, threads: int = 1) -> None:
         import highspy
 
         self.instance = instance
@@ -200,13 +200,23 @@ class BranchPrice:
                     row = self._row(-float(rest), self.inf)
                     self.h.changeCoeff(row, self.covered[m], -1.0)
                     self.cuts.append((row, m, coef))
+        # Identical AAVs n1 < n2 (same type and start, no prefix) ordered as in the MILP: n2
+        # visits task j only if n1 visits a task i <= j (a plan's identical routes can be
+        # permuted into that order). Rows x_{n1, i <= j} - x_{n2, j} >= 0: (row, n1, n2, j).
+        self.symmetry: list[tuple[int, int, int, int]] = []
+        if symmetry:
+            for group in identical_groups(instance, self.committed):
+                for n1, n2 in itertools.pairwise(group):
+                    for j in self.pricers[n2].network.tasks:
+                        self.symmetry.append((self._row(0.0, self.inf), n1, n2, j))
         if not closer_rows:
             for m in self.timed:
                 h.changeRowBounds(self.closer[m], -self.inf, self.inf)
+                h.changeRowBounds(self.closer_time[m], -self.inf, self.inf)
         full = sum(a.full_range_cost / instance.e_base for a in instance.aavs)
         self.big = 10.0 * (self.constant + len(self.tasks) * (w1 + w2 + w3 * full)) + 100.0
         self.columns: list[Column] = []
-        self.by_key: dict[tuple[int, tuple[Visit, ...]], Column] = {}
+        self.by_key: dict[tuple[int, tuple[Visit, ...], frozenset[int]], Column] = {}
         self.robust: dict[tuple, tuple[int, int]] = {}  # decision key -> (row, artificial)
         for n in range(n_aavs):
             self.add_column(n, ())
@@ -225,9 +235,10 @@ class BranchPrice:
         self.n_cols += 1
         return self.n_cols - 1
 
-    def make_column(self, n: int, tail: tuple[Visit, ...]) -> Column:
-        """A column from its free visits; every coefficient comes from the evaluator's walk
-        of the whole route."""
+    def make_column(self, n: int, tail: tuple[Visit, ...],
+                    closes: frozenset[int] | None = None) -> Column:
+        """A column from its free visits (closing ``closes``, default every timed task it
+        visits on time); every coefficient comes from the evaluator's walk of the route."""
         instance = self.instance
         route = schedule_route(instance, self.committed[n], tail)
         trace = self.evaluator.trace(n, route)
@@ -253,12 +264,14 @@ class BranchPrice:
             arcs.add((prev, v.node, mode))
             free[v.node] = v.amount
             prev, mode = v.node, DIRECT
-        return Column(n, tail, route, op, amounts, theta, free, frozenset(arcs))
+        closes = frozenset(theta) if closes is None else closes & frozenset(theta)
+        return Column(n, tail, route, op, amounts, theta, free, frozenset(arcs), closes)
 
-    def add_column(self, n: int, tail: tuple[Visit, ...]) -> Column | None:
-        if (n, tail) in self.by_key:
+    def add_column(self, n: int, tail: tuple[Visit, ...],
+                   closes: frozenset[int] | None = None) -> Column | None:
+        col = self.make_column(n, tail, closes)
+        if (n, tail, col.closes) in self.by_key:
             return None
-        col = self.make_column(n, tail)
         entries = [(self.conv[n], 1.0)]
         entries += [(self.cover[m], float(a)) for m, a in col.amounts.items() if m in self.cover]
         entries += [(self.aav_time[n, m], -t) for m, t in col.theta.items()
@@ -268,16 +281,16 @@ class BranchPrice:
                 entries.append((row, 1.0))
         entries += [(row, float(coef[n])) for row, m, coef in self.cuts
                     if n in coef and m in col.amounts]
+        for row, n1, n2, j in self.symmetry:
+            if n == n1 and any(i <= j for i in col.amounts):
+                entries.append((row, float(sum(i <= j for i in col.amounts))))
+            elif n == n2 and j in col.amounts:
+                entries.append((row, -1.0))
+        for m in col.closes:
+            entries += [(self.closer[m], 1.0), (self.closer_time[m], -col.theta[m])]
         col.index = self._col(col.op, 0.0, self.inf, entries)
-        for m, t in col.theta.items():
-            z = self._col(0.0, 0.0, self.inf, [(self.closer[m], 1.0),
-                                               (self.closer_time[m], -t)])
-            self.h.addRow(0.0, self.inf, 2, np.array([col.index, z], np.int32),
-                          np.array([1.0, -1.0]))
-            self.n_rows += 1
-            col.z[m] = z
         self.columns.append(col)
-        self.by_key[n, tail] = col
+        self.by_key[n, tail, col.closes] = col
         return col
 
     def _robust_row(self, key: tuple) -> tuple[int, int]:
@@ -352,18 +365,35 @@ class BranchPrice:
         for row, m, coef in self.cuts:
             if n in coef and duals[row] != 0.0:
                 cut_bonus[m] = cut_bonus.get(m, 0.0) + coef[n] * duals[row]
+        for row, n1, n2, j in self.symmetry:
+            if duals[row] == 0.0:
+                continue
+            if n == n1:  # every visit to a task i <= j counts once
+                for i in self.pricers[n].network.tasks:
+                    if i <= j:
+                        cut_bonus[i] = cut_bonus.get(i, 0.0) + duals[row]
+            elif n == n2:
+                cut_bonus[j] = cut_bonus.get(j, 0.0) - duals[row]
         prices = TaskPrices(0.0, cover, aav_time, closer, closer_time,
                             visit_bonus=visit_bonus, arc_bonus=arc_bonus, cut_bonus=cut_bonus)
-        prices.base = self.reduced_cost(self.by_key[n, ()], prices) - duals[self.conv[n]]
+        prices.base = self.reduced_cost(self.make_column(n, ()), prices) - duals[self.conv[n]]
         return prices
 
     @staticmethod
-    def reduced_cost(col: Column, prices: TaskPrices) -> float:
-        """Reduced cost of a column (its z at their best), without the convexity dual."""
+    def best_closes(col: Column, prices: TaskPrices) -> frozenset[int]:
+        """The tasks whose closing lowers this schedule's reduced cost."""
+        return frozenset(m for m, t in col.theta.items()
+                         if prices.closer_time.get(m, 0.0) * t - prices.closer.get(m, 0.0) < 0)
+
+    @classmethod
+    def reduced_cost(cls, col: Column, prices: TaskPrices) -> float:
+        """Reduced cost of a column's schedule with its best closing set, without the
+        convexity dual."""
         rc = col.op - math.fsum(prices.cover.get(m, 0.0) * a for m, a in col.amounts.items())
         for m, t in col.theta.items():
             rc += prices.aav_time.get(m, 0.0) * t
-            rc += min(0.0, prices.closer_time.get(m, 0.0) * t - prices.closer.get(m, 0.0))
+        for m in cls.best_closes(col, prices):
+            rc += prices.closer_time.get(m, 0.0) * col.theta[m] - prices.closer.get(m, 0.0)
         rc -= sum(prices.visit_bonus.get(m, 0.0) for m in col.free_amounts)
         rc -= sum(prices.cut_bonus.get(m, 0.0) for m in col.amounts)
         rc -= sum(prices.arc_bonus.get(a, 0.0) for a in col.arcs)
@@ -388,7 +418,7 @@ class BranchPrice:
                     _, found = pricer.price(prices[n], restrictions[n],
                                             limit=self.columns_per_aav,
                                             label_cap=self.heuristic_cap)
-                    added += self._add_found(n, found, restrictions)
+                    added += self._add_found(n, found, restrictions, prices[n])
             exact = added == 0
             if exact:
                 least_total = 0.0
@@ -396,7 +426,7 @@ class BranchPrice:
                     least, found = pricer.price(prices[n], restrictions[n],
                                                 limit=self.columns_per_aav)
                     least_total += min(0.0, least)
-                    added += self._add_found(n, found, restrictions)
+                    added += self._add_found(n, found, restrictions, prices[n])
                 bound = max(bound, value + least_total)
             clock["pricing"] += time.perf_counter() - began
             # Columns added after this LP have lambda = 0 in its solution.
@@ -408,11 +438,13 @@ class BranchPrice:
             if time.perf_counter() >= deadline:
                 return value, bound, x, False
 
-    def _add_found(self, n: int, found: list, restrictions: list[Restrictions]) -> int:
+    def _add_found(self, n: int, found: list, restrictions: list[Restrictions],
+                   prices: TaskPrices) -> int:
         added = 0
         for schedule in found:
+            closes = self.best_closes(self.make_column(n, schedule.tail), prices)
             for k in self.identical.get(n, (n,)):
-                col = self.add_column(k, schedule.tail)
+                col = self.add_column(k, schedule.tail, closes)
                 if col is None:
                     continue
                 if not _compatible(col, restrictions[k]):
@@ -486,12 +518,17 @@ class BranchPrice:
         free = [len(p) for p in self.committed]
         best_routes = canonical_routes(instance, incumbent, free)
         best_J = self.evaluator.cost(best_routes)
+        # The incumbent's columns, each task closed by its latest member (its J exactly).
+        latest: dict[int, tuple[float, int]] = {}
+        for trace in self.evaluator.evaluate(best_routes).traces:
+            for m, c in trace.contributions:
+                latest[m] = max(latest.get(m, (-math.inf, -1)), (c.arrival, trace.aav))
         for n, route in enumerate(best_routes):
             tail = tuple(route[free[n]:])
             if tail and instance.is_depot(tail[-1].node):
                 tail = tail[:-1]
             if tail:
-                self.add_column(n, tail)
+                self.add_column(n, tail, frozenset(m for m, (_, k) in latest.items() if k == n))
         counter = itertools.count()
         queue: list[tuple[float, int, tuple[Decision, ...]]] = [(-math.inf, next(counter), ())]
         nodes = 0
@@ -570,8 +607,6 @@ class BranchPrice:
 
 
 def _identical(instance: Instance, committed: Sequence[Route]) -> dict[int, tuple[int, ...]]:
-    from tsac_bench.formulations.network import identical_groups
-
     groups = {}
     for group in identical_groups(instance, committed):
         for n in group:

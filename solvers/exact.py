@@ -140,8 +140,10 @@ class BranchPriceAllocator(Settings):
 
     def __init__(self, time_limit: float | None = None, incumbent: str = "dga",
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
-                 closer_rows: bool = True, cover_cuts: bool = True, threads: int = 1) -> None:
+                 closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
+                 threads: int = 1) -> None:
         self.time_limit = time_limit
+        self.symmetry = symmetry
         self.threads = threads
         self.cover_cuts = cover_cuts
         self.incumbent = incumbent
@@ -171,7 +173,7 @@ class BranchPriceAllocator(Settings):
                                  heuristic_cap=self.heuristic_cap,
                                  columns_per_aav=self.columns_per_aav,
                                  closer_rows=self.closer_rows, cover_cuts=self.cover_cuts,
-                                 threads=self.threads)
+                                 symmetry=self.symmetry, threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

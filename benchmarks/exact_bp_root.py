@@ -20,10 +20,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from exact_root_bounds import root_bound  # noqa: E402
+from exact_root_bounds import root_bound
 
-from tsac_bench.formulations.branch_price import BranchPrice  # noqa: E402
-from tsac_bench.io import read_instance  # noqa: E402
+from tsac_bench.formulations.branch_price import BranchPrice
+from tsac_bench.io import read_instance
 
 ROOT = Path(__file__).resolve().parent.parent
 REGRESSION = ROOT / "instances" / "regression"

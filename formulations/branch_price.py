@@ -44,7 +44,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -557,7 +557,7 @@ class BranchPrice:
                 root_bound = node_bound
             plan = self.rounded_plan(x)
             J = self.evaluator.cost(plan)
-            if J < best_J - tolerance(best_J):
+            if best_J - tolerance(best_J) > J:
                 best_J, best_routes = J, plan
             if node_bound >= best_J - tolerance(best_J):
                 continue
@@ -580,9 +580,9 @@ class BranchPrice:
                         f"best {best_J:.6f} branch {choice}")
                 continue
             J = self.evaluator.cost(choice)
-            if J < best_J - tolerance(best_J):
+            if best_J - tolerance(best_J) > J:
                 best_J, best_routes = J, choice
-            if J > value + 1e-6 * max(1.0, abs(value)):
+            if value + 1e-6 * max(1.0, abs(value)) < J:
                 status, stop_reason = "error", (f"integral LP {value} but its plan has J {J}")
                 break
         open_bounds = [b for b, _, _ in queue]

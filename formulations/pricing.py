@@ -43,8 +43,8 @@ from tsac_bench.model import Instance, Route, Visit
 class TaskPrices:
     """The duals one AAV's pricing sees. A visit to task m at arrival t with amount a adds
     op_cost - cover[m] * a + aav_time[m] * theta + min(0, closer_time[m] * theta - closer[m])
-    - visit_bonus[m] - cut_bonus[m] to the reduced cost, theta = (t - t_start) / horizon (time terms only for
-    tasks in ``timed``); each arc adds -arc_bonus[(tail, head, mode)]."""
+    - visit_bonus[m] - cut_bonus[m] to the reduced cost, theta = (t - t_start) / horizon
+    (time terms only for tasks in ``timed``); each arc adds -arc_bonus[(tail, head, mode)]."""
 
     base: float  # reduced cost of the empty schedule (prefix only): -convexity dual + prefix
     cover: dict[int, float]
@@ -211,7 +211,7 @@ class Pricer:
                 if not label.alive:
                     continue
                 for arc in self.out.get(label.node, ()):
-                    _, j, mode, leg1, leg2 = arc
+                    _, j, _, leg1, leg2 = arc
                     bit = 1 << j
                     if label.visited & bit or j in forbidden_tasks or arc[:3] in forbidden_arcs:
                         continue

@@ -1,5 +1,6 @@
-"""``exact`` (Pyomo MILP solved by HiGHS) and ``exact-cpsat`` (OR-Tools CP-SAT): the optimum
-of Problem 1 behind the Allocator protocol.
+"""``exact`` (Pyomo MILP solved by HiGHS), ``exact-cpsat`` (OR-Tools CP-SAT) and ``exact-bp``
+(branch-and-price, formulations/branch_price.py): the optimum of Problem 1 behind the
+Allocator protocol.
 
 Both start from the ``greedy`` plan (a MIP start for HiGHS, a hint for CP-SAT) and return it
 when the solver finds nothing better in time. ``PlanResult.stats`` records status (optimal |
@@ -10,7 +11,9 @@ the solver's stop reason.
 ``exact`` is exact for a dynamic PlanningState too: the committed prefixes are fixed arcs and
 amounts of the MILP (a late committed visit keeps its C_time = 1), only visible tasks are
 added. ``exact-cpsat`` solves static states (no committed visits) over the visible tasks and
-refuses others: it is the independent cross-check of the offline optimum.
+refuses others: it is the independent cross-check of the offline optimum. ``exact-bp``
+solves both kinds of state (each AAV's schedule starts at the end of its prefix) and starts
+from the better of the greedy and the ``dga`` plan.
 """
 
 from __future__ import annotations

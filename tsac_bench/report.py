@@ -6,7 +6,8 @@ How the numbers are made (docs/reports.md says the same for readers of a report)
 * Per instance, J is first averaged over seeds; the statistics of a (mode, scale, method) cell
   (mean, std, median) are then taken over its instances.
 * J* of an instance is the manifest's ``J_star``; failing that, the smallest J of a static run
-  of an exact method (``exact``, ``exact-cpsat``) whose stats say ``status: optimal``. The
+  of an exact method (``exact``, ``exact-cpsat``, ``exact-bp``) whose stats say
+  ``status: optimal``. The
   lower bound is the largest of the manifest's ``lower_bound`` and those runs' ``lower_bound``.
   gap = (J - J*) / J*; where only a lower bound is known, ``gap_lb`` = (J - LB) / LB, an upper
   bound on the true gap, is reported instead and marked.

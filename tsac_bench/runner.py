@@ -34,12 +34,12 @@ from tsac_bench.store import ResultStore, job_key
 from tsac_bench.worker import GRACE_SECONDS, hard_timeout
 
 #: Methods that prove optimality; their static runs may supply J* (see ``report``).
-EXACT_METHODS = ("exact", "exact-cpsat")
+EXACT_METHODS = ("exact", "exact-cpsat", "exact-bp")
 #: Default solver time limit, in seconds per 10 tasks (never below one unit), of one plan
 #: call: a static job plans once, a dynamic one once plus once per release event. Sized so
 #: that the shipped sets (<= 10 tasks) run with every method in a few minutes on 2 cores;
 #: exact methods are capped short because there J* comes from the manifest, not from the run.
-DEFAULT_TIME_LIMITS = {"exact": 10.0, "exact-cpsat": 10.0}
+DEFAULT_TIME_LIMITS = {"exact": 10.0, "exact-cpsat": 10.0, "exact-bp": 10.0}
 DEFAULT_TIME_LIMIT = 2.0
 
 

@@ -432,7 +432,11 @@ class BranchPrice:
             # Columns added after this LP have lambda = 0 in its solution.
             x = np.concatenate([x, np.zeros(self.n_cols - len(x))])
             if exact and added == 0:
-                return value, max(bound, value), x, True
+                # Nothing new prices out: the LP value is the node's bound, unless the
+                # schedules of negative reduced cost were already columns (float noise
+                # between the labelling and HiGHS), where only the Lagrangian bound is sure.
+                settled = least_total >= -RC_TOLERANCE * max(1.0, abs(value))
+                return value, max(bound, value) if settled else bound, x, True
             if bound >= cutoff - PRUNE_TOLERANCE * max(1.0, abs(cutoff)):
                 return value, bound, x, False
             if time.perf_counter() >= deadline:
@@ -593,8 +597,8 @@ class BranchPrice:
             "status": status,
             "stop_reason": stop_reason,
             "J": best_J,
-            "lower_bound": global_bound,
-            "root_bound": root_bound,
+            "lower_bound": _finite(global_bound),
+            "root_bound": _finite(root_bound),
             "nodes": nodes,
             "open_nodes": len(queue),
             "columns": len(self.columns),
@@ -604,6 +608,11 @@ class BranchPrice:
             "wall_time": time.perf_counter() - began,
         }
         return BranchPriceResult(tuple(best_routes), best_J, global_bound, status, stats)
+
+
+def _finite(value: float | None) -> float | None:
+    """A bound, or None where none was proven (no exact pricing finished in time)."""
+    return value if value is not None and math.isfinite(value) else None
 
 
 def _identical(instance: Instance, committed: Sequence[Route]) -> dict[int, tuple[int, ...]]:

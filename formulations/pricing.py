@@ -90,18 +90,15 @@ class Schedule:
 
 
 class _Label:
-    __slots__ = ("alive", "amounts", "arc", "clock", "flown", "loaded", "node", "parent", "price",
-                 "table", "visited")
+    __slots__ = ("alive", "amounts", "arc", "clock", "cost", "flown", "loaded", "node", "parent",
+                 "price", "table", "visited")
 
     def __init__(self, node, clock, flown, visited, loaded, table, parent, arc, price, amounts):
         self.node, self.clock, self.flown, self.visited = node, clock, flown, visited
         self.loaded, self.table = loaded, table
         self.parent, self.arc, self.price, self.amounts = parent, arc, price, amounts
         self.alive = True
-
-    @property
-    def cost(self) -> float:
-        return float(self.table[-1, -1])
+        self.cost = float(table[-1, -1])  # the reduced cost of the finished schedule
 
 
 class Pricer:
@@ -183,6 +180,13 @@ class Pricer:
             out = out[self._rows, self._smaller]
         return out
 
+    def _first_visit(self, least: float, delivery: bool, price: float, low: int, high: int
+                     ) -> np.ndarray:
+        """``_visit`` of a table that is ``least`` everywhere (the first visit of a trip):
+        the largest amount the cell allows, up to ``high``, at least ``low``."""
+        room = self._rows if delivery else self._smaller
+        return np.where(room >= low, least - price * np.minimum(room, high), np.inf)
+
     def price(self, prices: TaskPrices, restrictions: Restrictions, *, limit: int = 50,
               label_cap: int | None = None) -> tuple[float, list[Schedule]]:
         """(least reduced cost, up to ``limit`` schedules of negative reduced cost, least
@@ -222,7 +226,7 @@ class Pricer:
                     if leg2 is not None:
                         flown += leg2
                         clock += leg2 / speed
-                        table = np.full_like(table, table[-1, -1])
+                        table = None  # a new trip: the old table collapses to its least value
                         loaded, leg = True, leg2
                     if clock < t_start[j]:
                         clock = t_start[j]
@@ -246,7 +250,11 @@ class Pricer:
                         a_high = min(a_high, a_low)
                     if a_high < a_low:
                         continue
-                    new_table = self._visit(table, is_delivery, price, a_low, a_high)
+                    if table is None:
+                        new_table = self._first_visit(label.cost, is_delivery, price, a_low,
+                                                      a_high)
+                    else:
+                        new_table = self._visit(table, is_delivery, price, a_low, a_high)
                     if not np.isfinite(new_table[-1, -1]):
                         continue
                     new_table += cost
@@ -285,8 +293,10 @@ class Pricer:
         return kept
 
     def _dominates(self, a: _Label, b: _Label) -> bool:
-        if not (a.clock <= b.clock and (a.loaded or not b.loaded)
-                and a.visited & b.visited == a.visited):
+        """The rule of the class docstring; the cheap scalar tests go first (the table test
+        needs cost_a <= cost_b, its cell (B, B))."""
+        if a.clock > b.clock or a.cost > b.cost or (b.loaded and not a.loaded) or (
+                a.visited & ~b.visited):
             return False
         if not (a.flown > self.max_range and b.flown > self.max_range) and not (
                 a.flown <= b.flown if self.dcum_monotone else a.flown == b.flown):
@@ -294,13 +304,17 @@ class Pricer:
         return bool((a.table <= b.table).all())
 
     def _insert(self, bucket: list[_Label], child: _Label) -> bool:
+        dominates = self._dominates
         for other in bucket:
-            if other.alive and self._dominates(other, child):
+            if other.alive and dominates(other, child):
                 return False
+        dropped = False
         for other in bucket:
-            if other.alive and self._dominates(child, other):
+            if other.alive and dominates(child, other):
                 other.alive = False
-        bucket[:] = [lab for lab in bucket if lab.alive]
+                dropped = True
+        if dropped:
+            bucket[:] = [lab for lab in bucket if lab.alive]
         bucket.append(child)
         return True
 

@@ -106,7 +106,7 @@ class Decision:
 class BranchPriceResult:
     routes: tuple[Route, ...]
     J: float
-    lower_bound: float
+    lower_bound: float | None  # None where no exact pricing finished in time
     status: str  # optimal | feasible | error
     stats: dict[str, Any]
 
@@ -607,7 +607,7 @@ class BranchPrice:
             "other_time": time.perf_counter() - began - clock["lp"] - clock["pricing"],
             "wall_time": time.perf_counter() - began,
         }
-        return BranchPriceResult(tuple(best_routes), best_J, global_bound, status, stats)
+        return BranchPriceResult(tuple(best_routes), best_J, _finite(global_bound), status, stats)
 
 
 def _finite(value: float | None) -> float | None:

@@ -26,7 +26,7 @@ import tsac_bench
 from tsac_bench.batch.runner import RunConfig, run_batch
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.io import read_instance, read_solution
-from tsac_bench.reporting.report import load, per_instance
+from tsac_bench.reporting.data import load, per_instance
 
 ROOT = Path(__file__).resolve().parent.parent
 

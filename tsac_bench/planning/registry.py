@@ -22,6 +22,7 @@ BUILTIN_METHODS: dict[str, str] = {
     "cnp": "tsac_bench.solvers.cnp:ContractNetAllocator",
     "exact": "tsac_bench.solvers.exact:ExactAllocator",
     "exact-cpsat": "tsac_bench.solvers.exact:CpSatAllocator",
+    "exact-bp": "tsac_bench.solvers.exact:BranchPriceAllocator",
     "tsac-ocf": "tsac_bench.solvers.tsac.policy:TSACOCFAllocator",
     "pyvrp": "tsac_bench.solvers.pyvrp_peer:PyVRPAllocator",
 }

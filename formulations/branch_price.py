@@ -1,0 +1,642 @@
+"""Branch-and-price for Problem 1 (``exact-bp``): a route master solved by column generation
+in HiGHS (highspy), exact labelling pricing (formulations/pricing.py), best-bound branching.
+
+Master LP (docs/formulations.md, "exact-bp"). A column c of AAV k is a whole schedule from k's
+anchor (its committed prefix, then free visits, each trip from a depot, amounts fixed) with a
+set S_c of the tasks it "closes", with op_c = w3 * sum of its q_k(m) (Eq. 9, range overrun
+included), a_cm its on-time amount at task m and theta_cm = (t_cm - t_start(m)) / T_hor its
+arrival term. Variables lambda_c >= 0, covered_m in [0, R_m], Ctime_m >= 0, nobody_m in [0, 1]:
+  min  sum op_c lambda_c + sum_m w1 (1 - covered_m / R_m) + w2 Ctime_m
+  s.t. sum_{c of k} lambda_c = 1                                 (convexity, per AAV)
+       sum_c a_cm lambda_c - covered_m >= 0                      (coverage)
+       sum_{c: m in S_c} lambda_c + nobody_m >= 1                (each task has a closer)
+       Ctime_m - sum_{c: m in S_c} theta_cm lambda_c - nobody_m >= 0
+       Ctime_m - sum_{c of k} theta_cm lambda_c - nobody_m >= 0  (every member's arrival)
+       sum_{n in S} coef_n x_nm - covered_m >= -rest  (coalition cover cuts, as in the MILP:
+                                                      x_nm = sum of n's columns visiting m).
+At a point with one column per AAV this is J exactly when the closer of each task is its
+latest member: covered = min(R, on-time goods); the per-AAV rows make Ctime at least the
+latest arrival, the closer no more; nobody = 1 exactly when no column closes m, which costs
+C_time = 1. Any other choice of closers only raises the objective, so the integer optimum is
+J*. Tasks whose committed visit is late keep C_time = 1 as a constant. The variants of one
+schedule with every subset S are the LP of "closer" variables z_cm in [0, lambda_c]; pricing
+picks the best S of a new schedule, so its reduced cost is
+op_c - dual(conv_k) + sum_m [-dual(cover_m) a_cm + dual(aav_km) theta_cm
+                             + min(0, dual(closer_time_m) theta_cm - dual(closer_m))],
+the labelling's objective. With every AAV's least reduced cost rc_k (exact pricing), the
+Lagrangian bound LP + sum_k min(0, rc_k) is valid at every iteration.
+
+Branching, in this order, on a fractional
+1. visit x_km = sum of lambda over k's columns that visit m (free part),
+2. arc x_k(i, j, mode) (the free arcs of k's columns),
+3. amount sum_c a_cm lambda_c of k at m (a_km <= v or >= v + 1).
+The "0" and "amount" sides are enforced in pricing (and on the existing columns), the "1"
+sides as rows sum lambda >= 1 with an artificial column of prohibitive cost (the node is
+infeasible if it stays positive). When all three are integral, every AAV's positive columns
+share one route and their average amounts are integral and feasible (the load rows of a
+route are an interval matrix), so that plan has J = the LP value and closes the node.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tsac_bench.formulations.network import (
+    DIRECT,
+    aav_network,
+    canonical_routes,
+    coalition_cover_cuts,
+    identical_groups,
+    late_committed,
+    parse_prefix,
+    prefix_arrivals,
+)
+from tsac_bench.formulations.pricing import (
+    Pricer,
+    Restrictions,
+    TaskPrices,
+    anchor_of,
+    schedule_route,
+)
+from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.model.evaluator import CostEvaluator
+
+#: Reduced costs above -this count as non-negative (column generation has converged).
+RC_TOLERANCE = 1e-9
+#: A node is pruned when its bound is within this (relative) of the incumbent.
+PRUNE_TOLERANCE = 1e-9
+#: A branching quantity within this of an integer counts as integral.
+INTEGRALITY = 1e-6
+
+Arc3 = tuple[int, int, int]
+
+
+@dataclass
+class Column:
+    aav: int
+    tail: tuple[Visit, ...]
+    route: Route
+    op: float
+    amounts: dict[int, int]  # on-time amount per task (coverage)
+    theta: dict[int, float]  # arrival term per timed task visited on time
+    free_amounts: dict[int, int]  # amount per free task visit (branching)
+    arcs: frozenset[Arc3]  # free arcs (branching)
+    closes: frozenset[int] = frozenset()  # S_c: the timed tasks this column closes
+    index: int = -1  # lambda's column in the LP
+
+
+@dataclass(frozen=True)
+class Decision:
+    kind: str  # "visit" | "arc" | "amount"
+    aav: int
+    key: Any  # task, or (tail, head, mode)
+    side: str  # "0" | "1" for visit/arc; "le" | "ge" for amount
+    value: int = 0
+
+
+@dataclass
+class BranchPriceResult:
+    routes: tuple[Route, ...]
+    J: float
+    lower_bound: float | None  # None where no exact pricing finished in time
+    status: str  # optimal | feasible | error
+    stats: dict[str, Any]
+
+
+class BranchPrice:
+    """The whole method for one planning state (tasks, committed prefixes)."""
+
+    def __init__(self, instance: Instance, tasks: Sequence[int] | None = None,
+                 committed: Sequence[Route] | None = None, *, heuristic_cap: int = 3,
+                 columns_per_aav: int = 30, closer_rows: bool = True,
+                 cover_cuts: bool = True, symmetry: bool = True, threads: int = 1) -> None:
+        import highspy
+
+        self.instance = instance
+        self.evaluator = CostEvaluator(instance)
+        n_aavs = instance.n_aavs
+        self.committed = tuple(committed) if committed else tuple(() for _ in range(n_aavs))
+        self.prefixes = [parse_prefix(instance, p) for p in self.committed]
+        in_prefix = {m for p in self.prefixes for _, m, _, _ in p.steps}
+        all_tasks = range(instance.n_tasks) if tasks is None else tasks
+        self.tasks = sorted(set(all_tasks) | in_prefix)
+        late = late_committed(instance, self.committed)
+        self.late_tasks = {m for _, m in late}
+        self.timed = frozenset(m for m in self.tasks if m not in self.late_tasks)
+        self.heuristic_cap = heuristic_cap
+        self.columns_per_aav = columns_per_aav
+        self.closer_rows = closer_rows
+        w1, w2, w3 = instance.weights
+        self.constant = (instance.unserved_task_cost * (instance.n_tasks - len(self.tasks))
+                         + w1 * len(self.tasks) + w2 * len(self.late_tasks))
+
+        self.pricers: list[Pricer] = []
+        for n in range(n_aavs):
+            prefix = self.prefixes[n]
+            required = [(i, j, k) for i, j, k, _ in prefix.steps]
+            trailing = None if prefix.trailing_depot is None else (prefix.last,
+                                                                     prefix.trailing_depot)
+            network = aav_network(instance, n, self.tasks,
+                                  prefix_arrivals(instance, n, self.committed[n]), required,
+                                  trailing)
+            arrival = flown = None
+            if prefix.steps:
+                trace = self.evaluator.trace(n, self.committed[n])
+                k = max(i for i, v in enumerate(self.committed[n])
+                        if not instance.is_depot(v.node))
+                arrival, flown = trace.arrivals[k], trace.distance_at_arrival[k]
+            anchor = anchor_of(instance, n, self.committed[n], prefix.trailing_depot,
+                               prefix.last, arrival, flown)
+            self.pricers.append(Pricer(instance, n, network, anchor, self.timed))
+        self.identical = _identical(instance, self.committed)
+
+        # --- the LP ----------------------------------------------------------------------
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+        h.setOptionValue("threads", int(threads))
+        self.h = h
+        self.inf = highspy.kHighsInf
+        self.n_cols = 0
+        self.n_rows = 0
+        self.conv = [self._row(1.0, 1.0) for _ in range(n_aavs)]
+        self.cover = {m: self._row(0.0, self.inf) for m in self.tasks}
+        self.closer = {m: self._row(1.0, self.inf) for m in self.timed}
+        self.closer_time = {m: self._row(0.0, self.inf) for m in self.timed}
+        self.aav_time = {(k, m): self._row(0.0, self.inf) for k in range(n_aavs)
+                         for m in self.pricers[k].network.tasks if m in self.timed}
+        self.covered = {}
+        for m in self.tasks:
+            demand = instance.tasks[m].demand
+            self.covered[m] = self._col(-w1 / demand, 0.0, demand, [(self.cover[m], -1.0)])
+        for m in self.timed:
+            ctime = [(self.closer_time[m], 1.0)] + [(r, 1.0) for (k, j), r in
+                                                     self.aav_time.items() if j == m]
+            self._col(w2, 0.0, self.inf, ctime)
+            nobody = [(self.closer[m], 1.0), (self.closer_time[m], -1.0)] + [
+                (r, -1.0) for (k, j), r in self.aav_time.items() if j == m]
+            self._col(0.0, 0.0, 1.0, nobody)
+        # Coalition cover cuts (network.coalition_cover_cuts): (row, task, {AAV: coef}).
+        self.cuts: list[tuple[int, int, dict[int, int]]] = []
+        if cover_cuts:
+            amount_cap = {}
+            for n, prefix in enumerate(self.prefixes):
+                for _, m, _, a in prefix.steps:
+                    amount_cap[n, m] = a
+            late_pairs = set(late)
+            for m in self.tasks:
+                demand = instance.tasks[m].demand
+                upper = {n: max(min(instance.aavs[n].capacity, demand), amount_cap.get((n, m), 0))
+                         for n in range(n_aavs) if m in self.pricers[n].network.tasks
+                         and (n, m) not in late_pairs}
+                for rest, coef in coalition_cover_cuts(upper, demand):
+                    row = self._row(-float(rest), self.inf)
+                    self.h.changeCoeff(row, self.covered[m], -1.0)
+                    self.cuts.append((row, m, coef))
+        # Identical AAVs n1 < n2 (same type and start, no prefix) ordered as in the MILP: n2
+        # visits task j only if n1 visits a task i <= j (a plan's identical routes can be
+        # permuted into that order). Rows x_{n1, i <= j} - x_{n2, j} >= 0: (row, n1, n2, j).
+        self.symmetry: list[tuple[int, int, int, int]] = []
+        if symmetry:
+            for group in identical_groups(instance, self.committed):
+                for n1, n2 in itertools.pairwise(group):
+                    for j in self.pricers[n2].network.tasks:
+                        self.symmetry.append((self._row(0.0, self.inf), n1, n2, j))
+        if not closer_rows:
+            for m in self.timed:
+                h.changeRowBounds(self.closer[m], -self.inf, self.inf)
+                h.changeRowBounds(self.closer_time[m], -self.inf, self.inf)
+        full = sum(a.full_range_cost / instance.e_base for a in instance.aavs)
+        self.big = 10.0 * (self.constant + len(self.tasks) * (w1 + w2 + w3 * full)) + 100.0
+        self.columns: list[Column] = []
+        self.by_key: dict[tuple[int, tuple[Visit, ...], frozenset[int]], Column] = {}
+        self.robust: dict[tuple, tuple[int, int]] = {}  # decision key -> (row, artificial)
+        for n in range(n_aavs):
+            self.add_column(n, ())
+
+    # --- LP plumbing ---------------------------------------------------------------------
+    def _row(self, lower: float, upper: float) -> int:
+        self.h.addRow(lower, upper, 0, np.zeros(0, np.int32), np.zeros(0))
+        self.n_rows += 1
+        return self.n_rows - 1
+
+    def _col(self, cost: float, lower: float, upper: float,
+             entries: Sequence[tuple[int, float]]) -> int:
+        rows = np.array([r for r, _ in entries], np.int32)
+        vals = np.array([v for _, v in entries], float)
+        self.h.addCol(cost, lower, upper, len(entries), rows, vals)
+        self.n_cols += 1
+        return self.n_cols - 1
+
+    def make_column(self, n: int, tail: tuple[Visit, ...],
+                    closes: frozenset[int] | None = None) -> Column:
+        """A column from its free visits (closing ``closes``, default every timed task it
+        visits on time); every coefficient comes from the evaluator's walk of the route."""
+        instance = self.instance
+        route = schedule_route(instance, self.committed[n], tail)
+        trace = self.evaluator.trace(n, route)
+        if not trace.feasible:
+            raise ValueError(f"infeasible schedule for AAV {n}: {trace.errors[0]}")
+        w3 = instance.weights[2]
+        amounts, theta = {}, {}
+        for m, c in trace.contributions:
+            task = instance.tasks[m]
+            if task.on_time(c.arrival):
+                amounts[m] = c.amount
+                if m in self.timed:
+                    theta[m] = (c.arrival - task.t_start) / instance.horizon
+        op = w3 * math.fsum(c.op_cost for _, c in trace.contributions)
+        anchor = self.pricers[n].anchor
+        prev, mode, arcs, free = anchor.node, DIRECT, set(), {}
+        if anchor.skip_depot_visit:
+            mode = self.prefixes[n].trailing_depot
+        for v in tail:
+            if instance.is_depot(v.node):
+                mode = v.node
+                continue
+            arcs.add((prev, v.node, mode))
+            free[v.node] = v.amount
+            prev, mode = v.node, DIRECT
+        closes = frozenset(theta) if closes is None else closes & frozenset(theta)
+        return Column(n, tail, route, op, amounts, theta, free, frozenset(arcs), closes)
+
+    def add_column(self, n: int, tail: tuple[Visit, ...],
+                   closes: frozenset[int] | None = None) -> Column | None:
+        col = self.make_column(n, tail, closes)
+        if (n, tail, col.closes) in self.by_key:
+            return None
+        entries = [(self.conv[n], 1.0)]
+        entries += [(self.cover[m], float(a)) for m, a in col.amounts.items() if m in self.cover]
+        entries += [(self.aav_time[n, m], -t) for m, t in col.theta.items()
+                    if (n, m) in self.aav_time]
+        for key, (row, _) in self.robust.items():
+            if _robust_matches(key, col):
+                entries.append((row, 1.0))
+        entries += [(row, float(coef[n])) for row, m, coef in self.cuts
+                    if n in coef and m in col.amounts]
+        for row, n1, n2, j in self.symmetry:
+            if n == n1 and any(i <= j for i in col.amounts):
+                entries.append((row, float(sum(i <= j for i in col.amounts))))
+            elif n == n2 and j in col.amounts:
+                entries.append((row, -1.0))
+        for m in col.closes:
+            entries += [(self.closer[m], 1.0), (self.closer_time[m], -col.theta[m])]
+        col.index = self._col(col.op, 0.0, self.inf, entries)
+        self.columns.append(col)
+        self.by_key[n, tail, col.closes] = col
+        return col
+
+    def _robust_row(self, key: tuple) -> tuple[int, int]:
+        if key not in self.robust:
+            row = self._row(-self.inf, self.inf)
+            members = [c.index for c in self.columns if _robust_matches(key, c)]
+            for j in members:
+                self.h.changeCoeff(row, j, 1.0)
+            artificial = self._col(self.big, 0.0, 0.0, [(row, 1.0)])
+            self.robust[key] = (row, artificial)
+        return self.robust[key]
+
+    def solve_lp(self) -> tuple[float, np.ndarray, np.ndarray]:
+        import highspy
+
+        self.h.run()
+        status = self.h.getModelStatus()
+        if status != highspy.HighsModelStatus.kOptimal:
+            raise RuntimeError(f"master LP not optimal: {self.h.modelStatusToString(status)}")
+        solution = self.h.getSolution()
+        value = self.h.getInfo().objective_function_value + self.constant
+        return value, np.asarray(solution.col_value), np.asarray(solution.row_dual)
+
+    # --- a node's restrictions -----------------------------------------------------------
+    def apply(self, decisions: Sequence[Decision]) -> list[Restrictions]:
+        """Set the LP and the pricing restrictions to a node's decisions."""
+        restrictions = [Restrictions(frozenset(), frozenset(), {}, {})
+                        for _ in self.instance.aavs]
+        active = set()
+        forbid_t = [set() for _ in self.instance.aavs]
+        forbid_a = [set() for _ in self.instance.aavs]
+        for d in decisions:
+            r = restrictions[d.aav]
+            if d.kind == "visit" and d.side == "0":
+                forbid_t[d.aav].add(d.key)
+            elif d.kind == "arc" and d.side == "0":
+                forbid_a[d.aav].add(d.key)
+            elif d.kind == "amount" and d.side == "le":
+                r.amount_high[d.key] = min(r.amount_high.get(d.key, 10**9), d.value)
+            elif d.kind == "amount" and d.side == "ge":
+                r.amount_low[d.key] = max(r.amount_low.get(d.key, 1), d.value)
+                active.add(("visit", d.aav, d.key))
+            else:
+                active.add((d.kind, d.aav, d.key))
+        for n, r in enumerate(restrictions):
+            r.forbidden_tasks = frozenset(forbid_t[n])
+            r.forbidden_arcs = frozenset(forbid_a[n])
+        for key in active:
+            self._robust_row(key)
+        for key, (row, artificial) in self.robust.items():
+            on = key in active
+            self.h.changeRowBounds(row, 1.0 if on else -self.inf, self.inf)
+            self.h.changeColBounds(artificial, 0.0, self.inf if on else 0.0)
+        for col in self.columns:
+            ok = _compatible(col, restrictions[col.aav])
+            self.h.changeColBounds(col.index, 0.0, self.inf if ok else 0.0)
+        return restrictions
+
+    def artificial_value(self, x: np.ndarray) -> float:
+        return sum(x[a] for _, a in self.robust.values())
+
+    def prices(self, n: int, duals: np.ndarray) -> TaskPrices:
+        cover = {m: duals[r] for m, r in self.cover.items()}
+        aav_time = {m: duals[r] for (k, m), r in self.aav_time.items() if k == n}
+        closer = {m: duals[r] for m, r in self.closer.items()}
+        closer_time = {m: duals[r] for m, r in self.closer_time.items()}
+        visit_bonus, arc_bonus = {}, {}
+        for (kind, k, key), (row, _) in self.robust.items():
+            if k == n and duals[row] != 0.0:
+                (visit_bonus if kind == "visit" else arc_bonus)[key] = duals[row]
+        cut_bonus: dict[int, float] = {}
+        for row, m, coef in self.cuts:
+            if n in coef and duals[row] != 0.0:
+                cut_bonus[m] = cut_bonus.get(m, 0.0) + coef[n] * duals[row]
+        for row, n1, n2, j in self.symmetry:
+            if duals[row] == 0.0:
+                continue
+            if n == n1:  # every visit to a task i <= j counts once
+                for i in self.pricers[n].network.tasks:
+                    if i <= j:
+                        cut_bonus[i] = cut_bonus.get(i, 0.0) + duals[row]
+            elif n == n2:
+                cut_bonus[j] = cut_bonus.get(j, 0.0) - duals[row]
+        prices = TaskPrices(0.0, cover, aav_time, closer, closer_time,
+                            visit_bonus=visit_bonus, arc_bonus=arc_bonus, cut_bonus=cut_bonus)
+        prices.base = self.reduced_cost(self.make_column(n, ()), prices) - duals[self.conv[n]]
+        return prices
+
+    @staticmethod
+    def best_closes(col: Column, prices: TaskPrices) -> frozenset[int]:
+        """The tasks whose closing lowers this schedule's reduced cost."""
+        return frozenset(m for m, t in col.theta.items()
+                         if prices.closer_time.get(m, 0.0) * t - prices.closer.get(m, 0.0) < 0)
+
+    @classmethod
+    def reduced_cost(cls, col: Column, prices: TaskPrices) -> float:
+        """Reduced cost of a column's schedule with its best closing set, without the
+        convexity dual."""
+        rc = col.op - math.fsum(prices.cover.get(m, 0.0) * a for m, a in col.amounts.items())
+        for m, t in col.theta.items():
+            rc += prices.aav_time.get(m, 0.0) * t
+        for m in cls.best_closes(col, prices):
+            rc += prices.closer_time.get(m, 0.0) * col.theta[m] - prices.closer.get(m, 0.0)
+        rc -= sum(prices.visit_bonus.get(m, 0.0) for m in col.free_amounts)
+        rc -= sum(prices.cut_bonus.get(m, 0.0) for m in col.amounts)
+        rc -= sum(prices.arc_bonus.get(a, 0.0) for a in col.arcs)
+        return rc
+
+    # --- column generation at one node ---------------------------------------------------
+    def column_generation(self, restrictions: list[Restrictions], cutoff: float,
+                          deadline: float, clock: dict[str, float]
+                          ) -> tuple[float, float, np.ndarray, bool]:
+        """(LP value, best Lagrangian bound, primal, converged). Stops early when the
+        bound reaches ``cutoff`` or at ``deadline``."""
+        bound = -math.inf
+        while True:
+            began = time.perf_counter()
+            value, x, duals = self.solve_lp()
+            clock["lp"] += time.perf_counter() - began
+            began = time.perf_counter()
+            prices = [self.prices(n, duals) for n in range(self.instance.n_aavs)]
+            added = 0
+            if self.heuristic_cap:
+                for n, pricer in enumerate(self.pricers):
+                    _, found = pricer.price(prices[n], restrictions[n],
+                                            limit=self.columns_per_aav,
+                                            label_cap=self.heuristic_cap)
+                    added += self._add_found(n, found, restrictions, prices[n])
+            exact = added == 0
+            if exact:
+                least_total = 0.0
+                for n, pricer in enumerate(self.pricers):
+                    least, found = pricer.price(prices[n], restrictions[n],
+                                                limit=self.columns_per_aav)
+                    least_total += min(0.0, least)
+                    added += self._add_found(n, found, restrictions, prices[n])
+                bound = max(bound, value + least_total)
+            clock["pricing"] += time.perf_counter() - began
+            # Columns added after this LP have lambda = 0 in its solution.
+            x = np.concatenate([x, np.zeros(self.n_cols - len(x))])
+            if exact and added == 0:
+                # Nothing new prices out: the LP value is the node's bound, unless the
+                # schedules of negative reduced cost were already columns (float noise
+                # between the labelling and HiGHS), where only the Lagrangian bound is sure.
+                settled = least_total >= -RC_TOLERANCE * max(1.0, abs(value))
+                return value, max(bound, value) if settled else bound, x, True
+            if bound >= cutoff - PRUNE_TOLERANCE * max(1.0, abs(cutoff)):
+                return value, bound, x, False
+            if time.perf_counter() >= deadline:
+                return value, bound, x, False
+
+    def _add_found(self, n: int, found: list, restrictions: list[Restrictions],
+                   prices: TaskPrices) -> int:
+        added = 0
+        for schedule in found:
+            closes = self.best_closes(self.make_column(n, schedule.tail), prices)
+            for k in self.identical.get(n, (n,)):
+                col = self.add_column(k, schedule.tail, closes)
+                if col is None:
+                    continue
+                if not _compatible(col, restrictions[k]):
+                    self.h.changeColBounds(col.index, 0.0, 0.0)
+                elif k == n:
+                    added += 1
+        return added
+
+    # --- reading plans off the LP --------------------------------------------------------
+    def rounded_plan(self, x: np.ndarray) -> tuple[Route, ...]:
+        """Each AAV's column of largest lambda (a feasible plan)."""
+        best: dict[int, tuple[float, Column]] = {}
+        for col in self.columns:
+            v = x[col.index]
+            if col.aav not in best or v > best[col.aav][0]:
+                best[col.aav] = (v, col)
+        return tuple(best[n][1].route for n in range(self.instance.n_aavs))
+
+    def branching_candidates(self, x: np.ndarray) -> Decision | tuple[Route, ...]:
+        """The most fractional visit, then arc, then amount; or the integral plan."""
+        visit: dict[tuple[int, int], float] = {}
+        arc: dict[tuple[int, Arc3], float] = {}
+        amount: dict[tuple[int, int], float] = {}
+        for col in self.columns:
+            v = x[col.index]
+            if v <= 1e-12:
+                continue
+            for m, a in col.free_amounts.items():
+                visit[col.aav, m] = visit.get((col.aav, m), 0.0) + v
+                amount[col.aav, m] = amount.get((col.aav, m), 0.0) + v * a
+            for e in col.arcs:
+                arc[col.aav, e] = arc.get((col.aav, e), 0.0) + v
+        for kind, values in (("visit", visit), ("arc", arc)):
+            frac = [(abs(v - 0.5), key) for key, v in sorted(values.items())
+                    if INTEGRALITY < v < 1 - INTEGRALITY]
+            if frac:
+                (k, key) = min(frac)[1]
+                return Decision(kind, k, key, "0")
+        frac = [(abs(v - math.floor(v) - 0.5), key) for key, v in sorted(amount.items())
+                if abs(v - round(v)) > INTEGRALITY]
+        if frac:
+            k, m = min(frac)[1]
+            return Decision("amount", k, m, "le", math.floor(amount[k, m]))
+        routes = []
+        for n in range(self.instance.n_aavs):
+            cols = [c for c in self.columns if c.aav == n and x[c.index] > 1e-12]
+            route = max(cols, key=lambda c: x[c.index]).route
+            routes.append(tuple(Visit(v.node, round(amount[n, v.node]))
+                                if v.node in cols[0].free_amounts else v for v in route))
+        return tuple(routes)
+
+    def root(self, time_limit: float | None = None) -> dict[str, float]:
+        """The root LP by column generation alone (no incumbent, no branching): its value,
+        the Lagrangian bound, whether it converged, columns and seconds."""
+        began = time.perf_counter()
+        deadline = math.inf if time_limit is None else began + time_limit
+        clock = {"lp": 0.0, "pricing": 0.0}
+        value, bound, _, converged = self.column_generation(self.apply(()), math.inf,
+                                                            deadline, clock)
+        return {"lp": value, "bound": bound if not converged else value,
+                "converged": converged, "columns": len(self.columns),
+                "seconds": time.perf_counter() - began}
+
+    # --- the search ----------------------------------------------------------------------
+    def solve(self, incumbent: Sequence[Route], time_limit: float | None = None,
+              log: Callable[[str], None] | None = None) -> BranchPriceResult:
+        began = time.perf_counter()
+        deadline = math.inf if time_limit is None else began + time_limit
+        clock = {"lp": 0.0, "pricing": 0.0}
+        instance = self.instance
+        free = [len(p) for p in self.committed]
+        best_routes = canonical_routes(instance, incumbent, free)
+        best_J = self.evaluator.cost(best_routes)
+        # The incumbent's columns, each task closed by its latest member (its J exactly).
+        latest: dict[int, tuple[float, int]] = {}
+        for trace in self.evaluator.evaluate(best_routes).traces:
+            for m, c in trace.contributions:
+                latest[m] = max(latest.get(m, (-math.inf, -1)), (c.arrival, trace.aav))
+        for n, route in enumerate(best_routes):
+            tail = tuple(route[free[n]:])
+            if tail and instance.is_depot(tail[-1].node):
+                tail = tail[:-1]
+            if tail:
+                self.add_column(n, tail, frozenset(m for m, (_, k) in latest.items() if k == n))
+        counter = itertools.count()
+        queue: list[tuple[float, int, tuple[Decision, ...]]] = [(-math.inf, next(counter), ())]
+        nodes = 0
+        root_bound = None
+        global_bound = -math.inf
+        status = "optimal"
+        stop_reason = "optimal"
+
+        def tolerance(J: float) -> float:
+            return PRUNE_TOLERANCE * max(1.0, abs(J))
+
+        while queue:
+            bound, _, decisions = heapq.heappop(queue)
+            if bound >= best_J - tolerance(best_J):
+                continue
+            if time.perf_counter() >= deadline:
+                heapq.heappush(queue, (bound, next(counter), decisions))
+                status, stop_reason = "feasible", "time limit"
+                break
+            nodes += 1
+            restrictions = self.apply(decisions)
+            value, node_bound, x, converged = self.column_generation(
+                restrictions, best_J, deadline, clock)
+            node_bound = max(node_bound, bound)
+            if root_bound is None:
+                root_bound = node_bound
+            plan = self.rounded_plan(x)
+            J = self.evaluator.cost(plan)
+            if best_J - tolerance(best_J) > J:
+                best_J, best_routes = J, plan
+            if node_bound >= best_J - tolerance(best_J):
+                continue
+            if not converged:  # the deadline: keep the node open with its bound
+                heapq.heappush(queue, (node_bound, next(counter), decisions))
+                continue
+            if self.artificial_value(x) > 1e-9:
+                continue  # infeasible node
+            choice = self.branching_candidates(x)
+            if isinstance(choice, Decision):
+                if choice.kind == "amount":
+                    sides = [choice, Decision("amount", choice.aav, choice.key, "ge",
+                                              choice.value + 1)]
+                else:
+                    sides = [choice, Decision(choice.kind, choice.aav, choice.key, "1")]
+                for side in sides:
+                    heapq.heappush(queue, (node_bound, next(counter), (*decisions, side)))
+                if log:
+                    log(f"node {nodes}: LP {value:.6f} bound {node_bound:.6f} "
+                        f"best {best_J:.6f} branch {choice}")
+                continue
+            J = self.evaluator.cost(choice)
+            if best_J - tolerance(best_J) > J:
+                best_J, best_routes = J, choice
+            if value + 1e-6 * max(1.0, abs(value)) < J:
+                status, stop_reason = "error", (f"integral LP {value} but its plan has J {J}")
+                break
+        open_bounds = [b for b, _, _ in queue]
+        global_bound = min([best_J, *open_bounds]) if status != "optimal" else best_J
+        if status == "feasible" and not open_bounds:
+            status, stop_reason = "optimal", "optimal"
+        stats = {
+            "status": status,
+            "stop_reason": stop_reason,
+            "J": best_J,
+            "lower_bound": _finite(global_bound),
+            "root_bound": _finite(root_bound),
+            "nodes": nodes,
+            "open_nodes": len(queue),
+            "columns": len(self.columns),
+            "lp_time": clock["lp"],
+            "pricing_time": clock["pricing"],
+            "other_time": time.perf_counter() - began - clock["lp"] - clock["pricing"],
+            "wall_time": time.perf_counter() - began,
+        }
+        return BranchPriceResult(tuple(best_routes), best_J, _finite(global_bound), status, stats)
+
+
+def _finite(value: float | None) -> float | None:
+    """A bound, or None where none was proven (no exact pricing finished in time)."""
+    return value if value is not None and math.isfinite(value) else None
+
+
+def _identical(instance: Instance, committed: Sequence[Route]) -> dict[int, tuple[int, ...]]:
+    groups = {}
+    for group in identical_groups(instance, committed):
+        for n in group:
+            groups[n] = tuple(group)
+    return groups
+
+
+def _robust_matches(key: tuple, col: Column) -> bool:
+    kind, k, what = key
+    if col.aav != k:
+        return False
+    return what in col.free_amounts if kind == "visit" else what in col.arcs
+
+
+def _compatible(col: Column, r: Restrictions) -> bool:
+    if any(m in r.forbidden_tasks for m in col.free_amounts):
+        return False
+    if any(a in r.forbidden_arcs for a in col.arcs):
+        return False
+    for m, hi in r.amount_high.items():
+        if col.free_amounts.get(m, 0) > hi:
+            return False
+    return all(col.free_amounts.get(m, lo) >= lo for m, lo in r.amount_low.items())
+

@@ -1,0 +1,213 @@
+"""``exact-bp`` (formulations/branch_price.py, formulations/pricing.py) against brute force,
+the proven regression optima, full enumeration of schedules, and the MILP in dynamic states."""
+
+from __future__ import annotations
+
+import json
+import random
+from pathlib import Path
+
+import pytest
+from brute_force import brute_force
+from plans import random_plan
+from tiny import tiny_instance
+
+from tsac_bench.formulations.branch_price import BranchPrice
+from tsac_bench.formulations.pricing import Restrictions, TaskPrices, all_schedules
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.io import read_instance
+from tsac_bench.planning import PlanningState, make_allocator
+from tsac_bench.solvers.exact import BranchPriceAllocator, ExactAllocator
+
+pytest.importorskip("highspy")
+
+ROOT = Path(__file__).resolve().parents[2]
+REGRESSION = ROOT / "instances" / "regression"
+MANIFEST = json.loads((REGRESSION / "manifest.json").read_text())["instances"]
+#: Regression instances exact-bp proves in a few seconds (the rest run in the slow suite).
+FAST = ["reg-release-2-4-s11", "reg-release-2-4-s13", "reg-release-2-5-s11",
+        "reg-static-2-4-s1", "reg-static-2-5-s3"]
+
+
+def close(a: float, b: float, rel: float = 1e-6) -> bool:
+    return abs(a - b) <= rel * max(1.0, abs(b))
+
+
+def solve_bp(instance, state=None, **settings):
+    state = state or PlanningState.static(instance)
+    return BranchPriceAllocator(incumbent="greedy", **settings).plan(state, seed=0)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_exact_bp_equals_brute_force(seed: int) -> None:
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=3, max_demand=4 + seed % 3)
+    J_brute, _ = brute_force(instance)
+    result = solve_bp(instance)
+    assert result.stats["status"] == "optimal"
+    assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
+    assert result.stats["lower_bound"] <= J_brute + 1e-9
+    assert result.stats["root_bound"] <= J_brute + 1e-9
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(10))
+def test_exact_bp_equals_brute_force_four_tasks(seed: int) -> None:
+    instance = tiny_instance(1000 + seed, n_aavs=2, n_tasks=4, max_demand=5,
+                             tight_range=seed % 2 == 0, n_depots=1)
+    J_brute, _ = brute_force(instance)
+    result = solve_bp(instance)
+    assert result.stats["status"] == "optimal"
+    assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
+
+
+def _regression(name: str) -> None:
+    instance = read_instance(REGRESSION / MANIFEST[name]["file"])
+    result = solve_bp(instance)
+    J_star = MANIFEST[name]["J_star"]
+    assert result.stats["status"] == "optimal"
+    assert close(CostEvaluator(instance).cost(result.routes), J_star)
+    assert result.stats["lower_bound"] <= J_star + 1e-6
+    assert result.stats["nodes"] >= 1 and result.stats["columns"] >= instance.n_aavs
+
+
+@pytest.mark.parametrize("name", FAST)
+def test_exact_bp_reproduces_the_manifest_optimum(name: str) -> None:
+    _regression(name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(set(MANIFEST) - set(FAST)))
+def test_exact_bp_reproduces_every_manifest_optimum(name: str) -> None:
+    _regression(name)
+
+
+def _random_prices(search: BranchPrice, n: int, rng: random.Random) -> TaskPrices:
+    """Duals of the signs the LP gives (>= 0 on every >= row), random magnitudes."""
+    tasks = search.tasks
+    prices = TaskPrices(
+        base=-rng.uniform(0, 2),
+        cover={m: rng.choice([0.0, rng.uniform(0, 30)]) for m in tasks},
+        aav_time={m: rng.uniform(0, 5) for m in tasks},
+        closer={m: rng.uniform(0, 3) for m in tasks},
+        closer_time={m: rng.uniform(0, 5) for m in tasks},
+        visit_bonus={m: rng.uniform(0, 1) for m in tasks if rng.random() < 0.5},
+        cut_bonus={m: rng.uniform(0, 2) for m in tasks if rng.random() < 0.5},
+        arc_bonus={(a.tail, a.head, a.mode): rng.uniform(0, 1)
+                   for a in search.pricers[n].network.arcs if rng.random() < 0.3})
+    return prices
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_pricing_finds_the_least_reduced_cost_of_all_schedules(seed: int) -> None:
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=3, max_demand=4)
+    search = BranchPrice(instance)
+    rng = random.Random(seed)
+    checked = 0
+    for n, pricer in enumerate(search.pricers):
+        for use_lp in (True, False):
+            if use_lp:
+                _, _, duals = search.solve_lp()
+                prices = search.prices(n, duals)
+                conv = duals[search.conv[n]]
+            else:
+                prices = _random_prices(search, n, rng)
+                conv = -prices.base
+            least, found = pricer.price(prices, Restrictions())
+            every = [search.reduced_cost(search.make_column(n, tail), prices) - conv
+                     for tail in all_schedules(pricer)]
+            assert len(every) > 1
+            assert least == pytest.approx(min(every), abs=1e-9)
+            for schedule in found:  # the labelling's arithmetic is the evaluator's
+                column = search.make_column(n, schedule.tail)
+                assert schedule.reduced_cost == pytest.approx(
+                    search.reduced_cost(column, prices) - conv, abs=1e-9)
+            checked += 1
+    assert checked == 4
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_bound_never_exceeds_any_plan(seed: int) -> None:
+    instance = tiny_instance(50 + seed, n_aavs=3, n_tasks=5, max_demand=6)
+    evaluator = CostEvaluator(instance)
+    # A short limit leaves the search open: its bound must still be a bound.
+    result = solve_bp(instance, time_limit=1.0)
+    bound = result.stats["lower_bound"]
+    assert bound is not None and result.stats["root_bound"] is not None
+    assert bound <= result.stats["J"] + 1e-9
+    assert result.stats["root_bound"] <= result.stats["J"] + 1e-9
+    plans = [random_plan(instance, s) for s in range(20)]
+    plans += [make_allocator(m).plan(PlanningState.static(instance)).routes
+              for m in ("greedy", "dga")]
+    for plan in plans:
+        assert bound <= evaluator.cost(plan) + 1e-9
+
+
+def _dynamic_states(seed: int):
+    """Planning states with committed prefixes cut from a random plan at random lengths."""
+    instance = tiny_instance(200 + seed, n_aavs=3, n_tasks=4, max_demand=5)
+    plan = random_plan(instance, seed)
+    rng = random.Random(seed)
+    committed = tuple(route[:rng.randint(0, max(0, len(route) - 1))] for route in plan)
+    visible = frozenset(rng.sample(range(instance.n_tasks), 3))
+    return instance, PlanningState(instance, 10.0, visible, committed)
+
+
+#: exact-bp's dynamic states predate the physical dynamic run (issue 15): its schedules leave
+#: the anchor at its last arrival, not at the re-plan time, and ignore recorded loads, so on
+#: these states it finds a J below the physical optimum; it is static-only until they do.
+NOT_YET_PHYSICAL = pytest.mark.xfail(strict=True, reason="exact-bp does not yet model "
+                                     "planned_at departures and recorded loads")
+
+
+@pytest.mark.parametrize("seed", [pytest.param(s, marks=NOT_YET_PHYSICAL) if s in (0, 1, 3, 7)
+                                  else s for s in range(8)])
+def test_dynamic_states_equal_the_milp(seed: int) -> None:
+    pytest.importorskip("pyomo")
+    instance, state = _dynamic_states(seed)
+    milp = ExactAllocator().plan(state)
+    bp = solve_bp(instance, state)
+    assert milp.stats["status"] == "optimal"
+    assert bp.stats["status"] == "optimal"
+    assert state.violations(bp.routes) == []
+    assert close(bp.stats["J"], milp.stats["J"]), (bp.stats["J"], milp.stats["J"])
+
+
+def test_dynamic_state_with_a_committed_join_as_the_milp() -> None:
+    # The MILP's hand-computed case (tests/solvers/test_exact.py): A1 joins T0, committed
+    # in A0's prefix.
+    from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind, Visit
+
+    fast = {"speed": 20, "capacity": 10, "max_range": 30000, "alpha": 10, "lam": 500}
+    instance = Instance(
+        "join", (AAV("A0", 2, 0, 0, **fast), AAV("A1", 2, 0, 0, **fast)),
+        (Depot("D0", 0, 0),), (Task("T0", 1000, 0, TaskKind.PICKUP, 20, 0, 3600),))
+    state = PlanningState(instance, 1.0, frozenset({0}), ((Visit(0, 10),), ()))
+    result = solve_bp(instance, state)
+    assert result.stats["status"] == "optimal"
+    assert result.routes == ((Visit(0, 10), Visit(1)), (Visit(0, 10), Visit(1)))
+    assert result.stats["J"] == pytest.approx(10 * 50 / 3600 + 2 * 10 / 800, rel=1e-12)
+
+
+def test_same_seed_same_result() -> None:
+    instance = tiny_instance(7, n_aavs=2, n_tasks=3, max_demand=5)
+    first, second = (solve_bp(instance) for _ in range(2))
+    assert first.stats["status"] == "optimal"
+    assert first.stats["nodes"] > 5  # a real tree, not only a root
+    assert first.routes == second.routes
+    for key in ("J", "lower_bound", "root_bound", "nodes", "columns"):
+        assert first.stats[key] == second.stats[key], key
+
+
+def test_registered_and_time_limited() -> None:
+    from tsac_bench.model.generator import generate
+
+    instance = generate("3/8", 1)
+    result = make_allocator("exact-bp", time_limit=5.0).plan(PlanningState.static(instance))
+    stats = result.stats
+    assert stats["status"] in ("optimal", "feasible")
+    # None only where not even the root's exact pricing finished in the limit.
+    assert stats["lower_bound"] is None or stats["lower_bound"] <= stats["J"] + 1e-9
+    assert stats["J"] <= stats["warm_start_J"] + 1e-9
+    assert CostEvaluator(instance).cost(result.routes) == pytest.approx(stats["J"], rel=1e-12)
+    for key in ("nodes", "columns", "lp_time", "pricing_time", "root_bound", "mip_gap"):
+        assert key in stats

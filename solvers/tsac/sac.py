@@ -188,6 +188,12 @@ class LabelledBatch:
         return cls(states, mask.to(device), labels.to(device))
 
 
+
+def _descend(optimizer: torch.optim.Optimizer, loss: Tensor) -> None:
+    optimizer.zero_grad()
+    loss.backward()
+    optimizer.step()
+
 class DiscreteSAC:
     """The actor, the twin critics, their targets, alpha and the optimisers."""
 
@@ -253,36 +259,32 @@ class DiscreteSAC:
         minimises Eq. 16 against them (plus ``clone_weight`` times the cross-entropy on
         demonstrations), the temperature follows its entropy target."""
         critic_loss = self.label_loss(batch)
-        self.critic_optimizer.zero_grad()
-        critic_loss.backward()
-        self.critic_optimizer.step()
+        _descend(self.critic_optimizer, critic_loss)
         states = Batch(batch.states, torch.zeros(0), torch.zeros(0), batch.states,
                        torch.zeros(0))
-        actor_loss, entropy = self.actor_loss(states)
-        if demonstrations is not None and clone_weight > 0:
-            actor_loss = actor_loss + clone_weight * self.clone_loss(demonstrations)
-        self.actor_optimizer.zero_grad()
-        actor_loss.backward()
-        self.actor_optimizer.step()
-        alpha_loss = self.alpha_loss(entropy, batch.states["action_mask"])
-        self.alpha_optimizer.zero_grad()
-        alpha_loss.backward()
-        self.alpha_optimizer.step()
+        actor_loss, entropy = self._policy_step(states, demonstrations, clone_weight)
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(),
                 "entropy": entropy.mean().item(), "alpha": self.alpha.item(),
                 "clone_weight": clone_weight}
+
+    def _policy_step(self, batch: Batch, demonstrations: Batch | None,
+                     clone_weight: float) -> tuple[Tensor, Tensor]:
+        """The actor's step (Eq. 16, plus ``clone_weight`` times the cross-entropy on
+        demonstrations) and the temperature's; returns the actor loss and the entropies."""
+        actor_loss, entropy = self.actor_loss(batch)
+        if demonstrations is not None and clone_weight > 0:
+            actor_loss = actor_loss + clone_weight * self.clone_loss(demonstrations)
+        _descend(self.actor_optimizer, actor_loss)
+        _descend(self.alpha_optimizer, self.alpha_loss(entropy, batch.states["action_mask"]))
+        return actor_loss, entropy
 
     def imitate(self, batch: Batch) -> dict[str, float]:
         """One pre-training step: the actor by cross-entropy on the batch's actions (a
         demonstrator's), the critics by Eqs. 14-15 under the actor being cloned."""
         critic_loss = self.critic_loss(batch)
-        self.critic_optimizer.zero_grad()
-        critic_loss.backward()
-        self.critic_optimizer.step()
+        _descend(self.critic_optimizer, critic_loss)
         clone_loss = self.clone_loss(batch)
-        self.actor_optimizer.zero_grad()
-        clone_loss.backward()
-        self.actor_optimizer.step()
+        _descend(self.actor_optimizer, clone_loss)
         self._track_targets()
         return {"critic_loss": critic_loss.item(), "clone_loss": clone_loss.item()}
 
@@ -302,19 +304,8 @@ class DiscreteSAC:
         """One SAC step; with ``demonstrations``, the actor loss also carries
         ``clone_weight`` times the cross-entropy on them (SAC + behaviour cloning)."""
         critic_loss = self.critic_loss(batch)
-        self.critic_optimizer.zero_grad()
-        critic_loss.backward()
-        self.critic_optimizer.step()
-        actor_loss, entropy = self.actor_loss(batch)
-        if demonstrations is not None and clone_weight > 0:
-            actor_loss = actor_loss + clone_weight * self.clone_loss(demonstrations)
-        self.actor_optimizer.zero_grad()
-        actor_loss.backward()
-        self.actor_optimizer.step()
-        alpha_loss = self.alpha_loss(entropy, batch.states["action_mask"])
-        self.alpha_optimizer.zero_grad()
-        alpha_loss.backward()
-        self.alpha_optimizer.step()
+        _descend(self.critic_optimizer, critic_loss)
+        actor_loss, entropy = self._policy_step(batch, demonstrations, clone_weight)
         self._track_targets()
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(),
                 "entropy": entropy.mean().item(), "alpha": self.alpha.item()}

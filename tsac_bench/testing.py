@@ -159,10 +159,10 @@ def allocator_checks(method: str | Allocator, *,
     """Every conformance check of ``method``; ``instances`` (name -> instance) replaces the
     generated ones that plans are checked on."""
     name = _method_name(method)
-    instances = dict(small_instances() if instances is None else instances)
+    generated = small_instances()
+    instances = dict(generated if instances is None else instances)
     edge = edge_cases()
-    timed = small_instances()["gen-4-10-s5"]
-    seeded = small_instances()["gen-2-5-s2"]
+    timed, seeded = generated["gen-4-10-s5"], generated["gen-2-5-s2"]
     checks: list[Check] = []
 
     def add(check_name: str, body: Callable[[], None]) -> None:
@@ -208,7 +208,7 @@ def allocator_checks(method: str | Allocator, *,
                 lambda i=instance, m=mode: feasible_and_scored(i, m))
 
     def records_every_planning_moment() -> None:
-        instance = small_instances()["gen-3-6-s3"]
+        instance = generated["gen-3-6-s3"]
         outcome = _run(method, instance, "dynamic")
         replans = outcome.stats["replans"]
         events = sorted({t.release for t in instance.tasks if t.release > 0})

@@ -104,14 +104,7 @@ def make_allocator(method: str | MethodSpec, **settings: Any) -> Allocator:
 
 def exact_methods() -> list[str]:
     """The available methods that declare ``proves_optimality`` (unloadable ones left out)."""
-    exact = []
-    for name in available_methods():
-        try:
-            if proves_optimality(allocator_class(name)):
-                exact.append(name)
-        except Exception:  # a broken plug-in is not an exact method; listing it elsewhere says why
-            continue
-    return exact
+    return [name for name in available_methods() if is_exact_method(name)]
 
 
 def is_exact_method(label: str) -> bool:

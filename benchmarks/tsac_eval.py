@@ -19,22 +19,28 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import re
 import shlex
 import statistics
 import time
 from pathlib import Path
 
+from tsac_bench.model import Instance
 from tsac_bench.model.generator import generate
+from tsac_bench.model.io import read_instance
 from tsac_bench.planning import make_allocator
 from tsac_bench.planning.solve import solve
 
 SCALES = ("16/40", "32/80")
+OWN_PLAN = "own plan, 1"
+PAPER_MC = Path(__file__).resolve().parent.parent / "instances" / "paper-mc"
 
 
 def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
              temperatures: bool) -> list[tuple[str, str, dict]]:
     tsac = {"policy": policy} if policy else {}
-    rows = [("hocf", "hocf", {}), ("rocf", "rocf", {}), ("tsac-ocf", "tsac-ocf", tsac)]
+    rows = [("hocf", "hocf", {}), ("rocf", "rocf", {}), ("dga", "dga", {}),
+            ("tsac-ocf", "tsac-ocf", tsac)]
     if temperatures:
         rows += [("tsac-ocf T=0.5", "tsac-ocf", {**tsac, "temperature": 0.5}),
                  ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**tsac, "temperature": 0.0})]
@@ -48,15 +54,29 @@ def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
 
 
 def footing(method: str, settings: dict) -> str:
-    """The row's start and games per plan call, as the method will run them."""
+    """The row's start and games per plan call, as the method will run them (an OCF game's
+    settings; other methods plan from scratch each call)."""
     resolved = make_allocator(method, **settings).settings()
+    if "init" not in resolved:
+        return OWN_PLAN
     return f"{resolved['init']}, {resolved['samples']}"
+
+
+def paper_mc(scale: str, count: int) -> list[Instance]:
+    """The first ``count`` instances by generator seed of ``instances/paper-mc/`` at ``scale``
+    (the reproduction's instances, generated with seeds 0..99)."""
+    folder = PAPER_MC / scale.replace("/", "-")
+    files = sorted(folder.glob("*.json"), key=lambda p: int(re.search(r"-s(\d+)$", p.stem)[1]))
+    return [read_instance(path) for path in files[:count]]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--instances", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=900_000)
+    parser.add_argument("--paper-mc", action="store_true",
+                        help="the first --instances files of instances/paper-mc/ per scale "
+                             "instead of generated seeds from --first-seed")
     parser.add_argument("--policy", default=None, help="policy file (default: shipped)")
     parser.add_argument("--scales", nargs="+", default=list(SCALES))
     parser.add_argument("--ablation", action="append", default=[], metavar="LABEL=FILE",
@@ -70,24 +90,31 @@ def main() -> None:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     seeds = range(args.first_seed, args.first_seed + args.instances)
-    command = (f"python benchmarks/tsac_eval.py --instances {args.instances} --first-seed "
-               f"{args.first_seed}" + (f" --policy {args.policy}" if args.policy else "")
+    source = " --paper-mc" if args.paper_mc else f" --first-seed {args.first_seed}"
+    command = (f"python benchmarks/tsac_eval.py --instances {args.instances}{source}"
+               + (f" --policy {args.policy}" if args.policy else "")
                + f" --scales {' '.join(args.scales)}"
                + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation)
                + (" --incumbent-rows" if args.incumbent_rows else "")
                + (" --temperatures" if args.temperatures else ""))
     lines = [
-        "# TSAC-OCF against HOCF and ROCF (dynamic mode, held-out instances)",
+        "# TSAC-OCF against HOCF, ROCF and DGA (dynamic mode, held-out instances)",
         "",
         f"Command: `{command}`  ",
         f"Machine: {platform.processor() or platform.machine()}, Python "
         f"{platform.python_version()}, pinned to one core (shared with other work: wall "
-        f"times are indicative only). Generated instances (default generator), seeds "
-        f"{seeds.start}..{seeds.stop - 1}; method seed 0; dynamic mode (plan at t = 0, "
+        f"times are indicative only). "
+        + (f"Instances: the first {args.instances} of `instances/paper-mc/` per scale "
+           "(generator seeds 0.."
+           f"{args.instances - 1}; training draws its instance seeds uniformly below 2^31, so "
+           "an episode meets one of these with odds of about 1 in 10^7)" if args.paper_mc else
+           f"Generated instances (default generator), seeds {seeds.start}..{seeds.stop - 1}")
+        + "; method seed 0; dynamic mode (plan at t = 0, "
         "re-plan at each release event); J is the evaluator's J of the executed routes. "
-        "Budget of every plan call, every method: no time limit, k_max 200000 decisions, "
-        "c_max 5000 consecutive rejections; `start, games` is the "
-        "structure each plan call starts from (`init`) and the games it plays (`samples`).",
+        "Budget of every OCF plan call: no time limit, k_max 200000 decisions, "
+        "c_max 5000 consecutive rejections (DGA: its own generations, no time limit); "
+        "`start, games` is the structure each plan call starts from (`init`) and the games "
+        "it plays (`samples`).",
         "",
         "| scale | method | start, games | mean J | median J | mean wall (s) | "
         "vs HOCF (mean J) | instances below HOCF |",
@@ -95,7 +122,8 @@ def main() -> None:
     ]
     unstable = 0
     for scale in args.scales:
-        instances = [generate(scale, seed) for seed in seeds]
+        instances = (paper_mc(scale, args.instances) if args.paper_mc
+                     else [generate(scale, seed) for seed in seeds])
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
         rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,
@@ -107,8 +135,9 @@ def main() -> None:
                 outcome = solve(instance, method, seed=0, mode="dynamic", settings=settings)
                 walls.setdefault(label, []).append(time.perf_counter() - began)
                 costs.setdefault(label, []).append(outcome.cost)
-                unstable += sum(r["stats"].get("stop") != "stable"
-                                for r in outcome.stats["replans"])
+                if starts[label] != OWN_PLAN:
+                    unstable += sum(r["stats"]["stop"] != "stable"
+                                    for r in outcome.stats["replans"])
             print(f"{scale} {label}: mean J {statistics.fmean(costs[label]):.2f}", flush=True)
         hocf = costs["hocf"]
         for label, values in costs.items():
@@ -121,7 +150,8 @@ def main() -> None:
                          f"| {below}/{len(values)} |")
     lines += ["", "`vs HOCF` is (mean J(HOCF) - mean J(method)) / mean J(HOCF): positive means "
               "lower cost than HOCF (the paper reports +39.76 % for TSAC-OCF at 32/80).",
-              f"Plan calls that stopped on a budget rather than a stable structure: {unstable}.",
+              "OCF plan calls that stopped on a budget rather than a stable structure: "
+              f"{unstable}.",
               ""]
     args.out.write_text("\n".join(lines))
     print("\n".join(lines))

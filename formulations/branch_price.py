@@ -218,6 +218,11 @@ class BranchPrice:
         self.columns: list[Column] = []
         self.by_key: dict[tuple[int, tuple[Visit, ...], frozenset[int]], Column] = {}
         self.robust: dict[tuple, tuple[int, int]] = {}  # decision key -> (row, artificial)
+        # The columns by (AAV, free task visited) and (AAV, free arc); the LP columns whose
+        # upper bound is 0 at the current node.
+        self.visiting: dict[tuple[int, int], list[Column]] = {}
+        self.using_arc: dict[tuple[int, Arc3], list[Column]] = {}
+        self.closed: set[int] = set()
         for n in range(n_aavs):
             self.add_column(n, ())
 
@@ -290,6 +295,10 @@ class BranchPrice:
             entries += [(self.closer[m], 1.0), (self.closer_time[m], -col.theta[m])]
         col.index = self._col(col.op, 0.0, self.inf, entries)
         self.columns.append(col)
+        for m in col.free_amounts:
+            self.visiting.setdefault((n, m), []).append(col)
+        for arc in col.arcs:
+            self.using_arc.setdefault((n, arc), []).append(col)
         self.by_key[n, tail, col.closes] = col
         return col
 
@@ -344,9 +353,22 @@ class BranchPrice:
             on = key in active
             self.h.changeRowBounds(row, 1.0 if on else -self.inf, self.inf)
             self.h.changeColBounds(artificial, 0.0, self.inf if on else 0.0)
-        for col in self.columns:
-            ok = _compatible(col, restrictions[col.aav])
-            self.h.changeColBounds(col.index, 0.0, self.inf if ok else 0.0)
+        # Only the columns whose bound changes since the last node are touched: the ones
+        # each decision excludes are found through the visit and arc indexes.
+        closed = set()
+        for n, r in enumerate(restrictions):
+            for m in r.forbidden_tasks:
+                closed.update(c.index for c in self.visiting.get((n, m), ()))
+            for arc in r.forbidden_arcs:
+                closed.update(c.index for c in self.using_arc.get((n, arc), ()))
+            for m in {*r.amount_low, *r.amount_high}:
+                closed.update(c.index for c in self.visiting.get((n, m), ())
+                              if not _compatible(c, r))
+        for index in closed - self.closed:
+            self.h.changeColBounds(index, 0.0, 0.0)
+        for index in self.closed - closed:
+            self.h.changeColBounds(index, 0.0, self.inf)
+        self.closed = closed
         return restrictions
 
     def artificial_value(self, x: np.ndarray) -> float:
@@ -453,6 +475,7 @@ class BranchPrice:
                     continue
                 if not _compatible(col, restrictions[k]):
                     self.h.changeColBounds(col.index, 0.0, 0.0)
+                    self.closed.add(col.index)
                 elif k == n:
                     added += 1
         return added

@@ -67,7 +67,7 @@ from tsac_bench.formulations.pricing import (
     schedule_route,
 )
 from tsac_bench.model import Instance, Route, Visit
-from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import PlanningState
 
 #: Reduced costs above -this count as non-negative (column generation has converged).
 RC_TOLERANCE = 1e-9
@@ -115,15 +115,20 @@ class BranchPrice:
     """The whole method for one planning state (tasks, committed prefixes)."""
 
     def __init__(self, instance: Instance, tasks: Sequence[int] | None = None,
-                 committed: Sequence[Route] | None = None, *, heuristic_cap: int = 3,
+                 committed: Sequence[Route] | None = None, plan_time: float = 0.0, *,
+                 heuristic_cap: int = 3,
                  columns_per_aav: int = 30, closer_rows: bool = True,
                  cover_cuts: bool = True, symmetry: bool = True, threads: int = 1) -> None:
         import highspy
 
         self.instance = instance
-        self.evaluator = CostEvaluator(instance)
         n_aavs = instance.n_aavs
         self.committed = tuple(committed) if committed else tuple(() for _ in range(n_aavs))
+        # Every free visit is planned at plan_time: the AAV leaves its anchor no earlier
+        # (PlanningState.anchor), and this evaluator prices every column so.
+        moment = PlanningState(instance, plan_time, frozenset(), self.committed)
+        self.plan_time = plan_time
+        self.evaluator = moment.evaluator()
         self.prefixes = [parse_prefix(instance, p) for p in self.committed]
         in_prefix = {m for p in self.prefixes for _, m, _, _ in p.steps}
         all_tasks = range(instance.n_tasks) if tasks is None else tasks
@@ -144,17 +149,12 @@ class BranchPrice:
             required = [(i, j, k) for i, j, k, _ in prefix.steps]
             trailing = None if prefix.trailing_depot is None else (prefix.last,
                                                                      prefix.trailing_depot)
+            leaves = moment.anchor(n)
             network = aav_network(instance, n, self.tasks,
                                   prefix_arrivals(instance, n, self.committed[n]), required,
-                                  trailing)
-            arrival = flown = None
-            if prefix.steps:
-                trace = self.evaluator.trace(n, self.committed[n])
-                k = max(i for i, v in enumerate(self.committed[n])
-                        if not instance.is_depot(v.node))
-                arrival, flown = trace.arrivals[k], trace.distance_at_arrival[k]
+                                  trailing, prefix.last, leaves.time)
             anchor = anchor_of(instance, n, self.committed[n], prefix.trailing_depot,
-                               prefix.last, arrival, flown)
+                               prefix.last, leaves)
             self.pricers.append(Pricer(instance, n, network, anchor, self.timed))
         self.identical = _identical(instance, self.committed)
 
@@ -543,7 +543,7 @@ class BranchPrice:
         clock = {"lp": 0.0, "pricing": 0.0}
         instance = self.instance
         free = [len(p) for p in self.committed]
-        best_routes = canonical_routes(instance, incumbent, free)
+        best_routes = canonical_routes(instance, incumbent, free, self.plan_time)
         best_J = self.evaluator.cost(best_routes)
         # The incumbent's columns, each task closed by its latest member (its J exactly).
         latest: dict[int, tuple[float, int]] = {}

@@ -37,6 +37,7 @@ from numba import njit
 
 from tsac_bench.formulations.network import DIRECT, START, AavNetwork
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.planning import Anchor as PlanningAnchor
 
 
 @dataclass
@@ -71,13 +72,15 @@ class Anchor:
     """Where the free part of an AAV's schedule starts: after its committed prefix."""
 
     node: int  # START or the last committed task
-    clock: float
-    flown: float
+    clock: float  # when the AAV can leave for its first free visit (MODEL.md, "Time")
+    flown: float  # Dcum when it leaves
     visited: int  # bit mask of committed tasks
     peak: int
     pickup: int
     loaded: bool
-    skip_depot_visit: bool  # the first free arc's depot is the prefix's trailing depot
+    #: The prefix ends with a depot visit the AAV has not left: it leaves from that depot,
+    #: and its first free arc (through that depot) has only the leg from it to fly.
+    skip_depot_visit: bool
 
 
 @dataclass
@@ -130,8 +133,14 @@ class Pricer:
         self.out: dict[int, list] = {}
         for a in network.arcs:
             p = start if a.tail == START else a.tail
-            legs = (dist[p][a.head], None) if a.mode == DIRECT else (dist[p][a.mode],
-                                                                      dist[a.mode][a.head])
+            if a.mode == DIRECT:
+                legs = (dist[p][a.head], None)
+            elif a.tail == anchor.node and anchor.skip_depot_visit:
+                # The AAV waits at this depot: the leg from it is left, in the fresh trip
+                # the anchor's load state already describes.
+                legs = (dist[a.mode][a.head], None)
+            else:
+                legs = (dist[p][a.mode], dist[a.mode][a.head])
             self.out.setdefault(a.tail, []).append((a.tail, a.head, a.mode, *legs))
         self.t_start = {j: float(instance.tasks[j].t_start) for j in network.tasks}
         self.t_end = {j: instance.tasks[j].latest_on_time for j in network.tasks}
@@ -526,8 +535,15 @@ def _cheapest_per_node(labels, node, cost, alive, cap, n_nodes):
 
 
 def anchor_of(instance: Instance, n: int, prefix: Route, trailing_depot: int | None,
-              last: int, arrival: float | None, flown: float | None) -> Anchor:
-    """The anchor after AAV n's committed ``prefix`` (walked for its current trip's load)."""
+              last: int, leaves: PlanningAnchor) -> Anchor:
+    """The anchor after AAV n's committed ``prefix`` (walked for its current trip's load),
+    leaving as the planning state's anchor says (``PlanningState.anchor``: its time and Dcum
+    there, and the goods on board from a depot whose load was recorded).
+
+    A recorded load L caps the trip's deliveries: delivered <= L, i.e. delivered + (B - L)
+    <= B, which is the peak's test with B - L in the place of the term max_i (p_i -
+    delivered_i) from before the first free visit; so the trip's peak starts at
+    delivered so far + B - L = B - on_board, if that is more than its walk gives."""
     peak = pickup = 0
     loaded = False
     visited = 0
@@ -542,8 +558,10 @@ def anchor_of(instance: Instance, n: int, prefix: Route, trailing_depot: int | N
             else:
                 pickup += v.amount
                 peak = max(peak, pickup)
-    return Anchor(last, 0.0 if arrival is None else arrival, 0.0 if flown is None else flown,
-                  visited, peak, pickup, loaded, trailing_depot is not None)
+    if leaves.on_board is not None:
+        peak = max(peak, instance.aavs[n].capacity - leaves.on_board)
+    return Anchor(last, leaves.time, leaves.flown, visited, peak, pickup, loaded,
+                  trailing_depot is not None)
 
 
 def schedule_route(instance: Instance, prefix: Route, tail: Sequence[Visit]) -> Route:

@@ -163,9 +163,6 @@ class BranchPriceAllocator(Settings):
 
     name = "exact-bp"
     proves_optimality = True
-    # Its dynamic states are not yet physical (tests/formulations/test_branch_price.py): until
-    # they are, solve and the runner give it static runs only.
-    modes = ("static",)
     setting_constraints = declare(
         time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
         incumbent=Options("dga", "greedy"),
@@ -199,7 +196,7 @@ class BranchPriceAllocator(Settings):
         began = time.perf_counter()
         limit = _limit(self.time_limit, time_limit)
         instance = state.instance
-        evaluator = CostEvaluator(instance)
+        evaluator = state.evaluator()
         # The search starts from the better of greedy and the chosen heuristic's plan.
         starts = [_greedy(state)]
         if self.incumbent != "greedy":
@@ -208,7 +205,7 @@ class BranchPriceAllocator(Settings):
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start),
                                  "warm_start_time": time.perf_counter() - began}
         try:
-            search = BranchPrice(instance, sorted(state.visible), state.committed,
+            search = BranchPrice(instance, sorted(state.visible), state.committed, state.time,
                                  heuristic_cap=self.heuristic_cap,
                                  columns_per_aav=self.columns_per_aav,
                                  closer_rows=self.closer_rows, cover_cuts=self.cover_cuts,

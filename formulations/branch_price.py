@@ -312,6 +312,27 @@ class BranchPrice:
             self.robust[key] = (row, artificial)
         return self.robust[key]
 
+    def basis(self) -> tuple[list, list]:
+        """The LP's current basis (column and row statuses)."""
+        basis = self.h.getBasis()
+        return list(basis.col_status), list(basis.row_status)
+
+    def restore_basis(self, saved: tuple[list, list] | None) -> None:
+        """Start the next LP from ``saved`` (a parent node's final basis): best-bound search
+        jumps across the tree, and from the last node's basis the first LP of a node took
+        hundreds of simplex iterations. Columns and rows added since are nonbasic at their
+        lower bound 0 and basic (slack) respectively, which keeps the basis square."""
+        import highspy
+
+        if saved is None:
+            return
+        cols, rows = saved
+        basis = highspy.HighsBasis()
+        basis.col_status = cols + [highspy.HighsBasisStatus.kLower] * (self.n_cols - len(cols))
+        basis.row_status = rows + [highspy.HighsBasisStatus.kBasic] * (self.n_rows - len(rows))
+        basis.valid = True
+        self.h.setBasis(basis)
+
     def solve_lp(self) -> tuple[float, np.ndarray, np.ndarray]:
         import highspy
 
@@ -557,7 +578,9 @@ class BranchPrice:
             if tail:
                 self.add_column(n, tail, frozenset(m for m, (_, k) in latest.items() if k == n))
         counter = itertools.count()
-        queue: list[tuple[float, int, tuple[Decision, ...]]] = [(-math.inf, next(counter), ())]
+        # Open nodes: (bound, tie-break, decisions, the parent's final LP basis or None).
+        queue: list[tuple[float, int, tuple[Decision, ...], Any]] = [
+            (-math.inf, next(counter), (), None)]
         nodes = 0
         root_bound = None
         global_bound = -math.inf
@@ -568,15 +591,16 @@ class BranchPrice:
             return PRUNE_TOLERANCE * max(1.0, abs(J))
 
         while queue:
-            bound, _, decisions = heapq.heappop(queue)
+            bound, _, decisions, basis = heapq.heappop(queue)
             if bound >= best_J - tolerance(best_J):
                 continue
             if time.perf_counter() >= deadline:
-                heapq.heappush(queue, (bound, next(counter), decisions))
+                heapq.heappush(queue, (bound, next(counter), decisions, basis))
                 status, stop_reason = "feasible", "time limit"
                 break
             nodes += 1
             restrictions = self.apply(decisions)
+            self.restore_basis(basis)
             value, node_bound, x, converged = self.column_generation(
                 restrictions, best_J, deadline, clock)
             node_bound = max(node_bound, bound)
@@ -589,7 +613,7 @@ class BranchPrice:
             if node_bound >= best_J - tolerance(best_J):
                 continue
             if not converged:  # the deadline: keep the node open with its bound
-                heapq.heappush(queue, (node_bound, next(counter), decisions))
+                heapq.heappush(queue, (node_bound, next(counter), decisions, basis))
                 continue
             if self.artificial_value(x) > 1e-9:
                 continue  # infeasible node
@@ -600,8 +624,9 @@ class BranchPrice:
                                               choice.value + 1)]
                 else:
                     sides = [choice, Decision(choice.kind, choice.aav, choice.key, "1")]
+                basis = self.basis()
                 for side in sides:
-                    heapq.heappush(queue, (node_bound, next(counter), (*decisions, side)))
+                    heapq.heappush(queue, (node_bound, next(counter), (*decisions, side), basis))
                 if log:
                     log(f"node {nodes}: LP {value:.6f} bound {node_bound:.6f} "
                         f"best {best_J:.6f} branch {choice}")
@@ -612,7 +637,7 @@ class BranchPrice:
             if value + 1e-6 * max(1.0, abs(value)) < J:
                 status, stop_reason = "error", (f"integral LP {value} but its plan has J {J}")
                 break
-        open_bounds = [b for b, _, _ in queue]
+        open_bounds = [b for b, _, _, _ in queue]
         global_bound = min([best_J, *open_bounds]) if status != "optimal" else best_J
         if status == "feasible" and not open_bounds:
             status, stop_reason = "optimal", "optimal"

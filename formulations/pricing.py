@@ -303,6 +303,13 @@ def _grown3(a, size):
 
 
 @njit(cache=True)
+def _wider(a, columns):
+    out = np.empty((a.shape[0], columns), a.dtype)
+    out[:, :a.shape[1]] = a
+    return out
+
+
+@njit(cache=True)
 def _visit_table(src, dst, delivery, price, low, high, scratch_i, scratch_v, row):
     """dst = src after a visit with amounts low..high at ``price`` per kg:
     min over a of src(c - a) - price * a, as a sliding-window minimum (monotone queue) of
@@ -406,6 +413,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
     cost[0] = root[size - 1, size - 1]
     count = 1
     bucket = np.empty((n_nodes, 64), np.int64)
+    bucket_clock = np.empty((n_nodes, 64))
+    bucket_cost = np.empty((n_nodes, 64))
     bucket_len = np.zeros(n_nodes, np.int64)
     frontier = np.zeros(1, np.int64)
     scratch_i = np.empty(size, np.int64)
@@ -479,29 +488,42 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                 alive[k], loaded[k] = True, has_goods
                 visited[k] = visited[lab]
                 visited[k, j >> 6] |= np.int64(1) << (j & 63)
-                # Dominance within the bucket of node j.
-                members = bucket[j, :bucket_len[j]]
+                # Dominance within the bucket of node j; its labels' clocks and costs are
+                # kept side by side so that the scan reads contiguous memory and tests the
+                # tables only where those two allow dominance.
+                members = bucket_len[j]
                 rejected = False
-                for other in members:
-                    if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
-                                                   flown, tables, max_range, dcum_monotone):
-                        rejected = True
-                        break
+                for i in range(members):
+                    if bucket_clock[j, i] <= t and bucket_cost[j, i] <= cost[k]:
+                        other = bucket[j, i]
+                        if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
+                                                       flown, tables, max_range,
+                                                       dcum_monotone):
+                            rejected = True
+                            break
                 if rejected:
                     continue
                 kept = 0
-                for other in members:
-                    if alive[other] and _dominates(k, other, clock, cost, loaded, visited,
-                                                   flown, tables, max_range, dcum_monotone):
+                for i in range(members):
+                    other = bucket[j, i]
+                    if not alive[other]:
+                        continue
+                    if bucket_clock[j, i] >= t and bucket_cost[j, i] >= cost[k] and \
+                            _dominates(k, other, clock, cost, loaded, visited, flown, tables,
+                                       max_range, dcum_monotone):
                         alive[other] = False
-                    else:
-                        bucket[j, kept] = other
-                        kept += 1
+                        continue
+                    bucket[j, kept] = other
+                    bucket_clock[j, kept] = bucket_clock[j, i]
+                    bucket_cost[j, kept] = bucket_cost[j, i]
+                    kept += 1
                 if kept == bucket.shape[1]:
-                    wider = np.empty((n_nodes, 2 * kept), np.int64)
-                    wider[:, :kept] = bucket
-                    bucket = wider
+                    bucket = _wider(bucket, 2 * kept)
+                    bucket_clock = _wider(bucket_clock, 2 * kept)
+                    bucket_cost = _wider(bucket_cost, 2 * kept)
                 bucket[j, kept] = k
+                bucket_clock[j, kept] = t
+                bucket_cost[j, kept] = cost[k]
                 bucket_len[j] = kept + 1
                 count += 1
                 if n_produced == produced.shape[0]:

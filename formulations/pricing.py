@@ -366,10 +366,11 @@ def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcu
                 return False
         elif flown[a] != flown[b]:
             return False
+    # Cells with y > x repeat (x, x): a trip's pickup goods never exceed its peak, so
+    # pickup <= y adds nothing to peak <= x there.
     ta, tb = tables[a], tables[b]
-    size = ta.shape[0]
-    for x in range(size):
-        for y in range(size):
+    for x in range(ta.shape[0]):
+        for y in range(x + 1):
             if ta[x, y] > tb[x, y]:
                 return False
     return True

@@ -67,7 +67,7 @@ from tsac_bench.formulations.pricing import (
     schedule_route,
 )
 from tsac_bench.model import Instance, Route, Visit
-from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import PlanningState
 
 #: Reduced costs above -this count as non-negative (column generation has converged).
 RC_TOLERANCE = 1e-9
@@ -115,15 +115,21 @@ class BranchPrice:
     """The whole method for one planning state (tasks, committed prefixes)."""
 
     def __init__(self, instance: Instance, tasks: Sequence[int] | None = None,
-                 committed: Sequence[Route] | None = None, *, heuristic_cap: int = 3,
+                 committed: Sequence[Route] | None = None, plan_time: float = 0.0, *,
+                 heuristic_cap: int = 3,
                  columns_per_aav: int = 30, closer_rows: bool = True,
-                 cover_cuts: bool = True, symmetry: bool = True, threads: int = 1) -> None:
+                 cover_cuts: bool = True, symmetry: bool = True, threads: int = 1,
+                 strong_candidates: int = 4) -> None:
         import highspy
 
         self.instance = instance
-        self.evaluator = CostEvaluator(instance)
         n_aavs = instance.n_aavs
         self.committed = tuple(committed) if committed else tuple(() for _ in range(n_aavs))
+        # Every free visit is planned at plan_time: the AAV leaves its anchor no earlier
+        # (PlanningState.anchor), and this evaluator prices every column so.
+        moment = PlanningState(instance, plan_time, frozenset(), self.committed)
+        self.plan_time = plan_time
+        self.evaluator = moment.evaluator()
         self.prefixes = [parse_prefix(instance, p) for p in self.committed]
         in_prefix = {m for p in self.prefixes for _, m, _, _ in p.steps}
         all_tasks = range(instance.n_tasks) if tasks is None else tasks
@@ -134,6 +140,7 @@ class BranchPrice:
         self.heuristic_cap = heuristic_cap
         self.columns_per_aav = columns_per_aav
         self.closer_rows = closer_rows
+        self.strong_candidates = strong_candidates
         w1, w2, w3 = instance.weights
         self.constant = (instance.unserved_task_cost * (instance.n_tasks - len(self.tasks))
                          + w1 * len(self.tasks) + w2 * len(self.late_tasks))
@@ -144,17 +151,12 @@ class BranchPrice:
             required = [(i, j, k) for i, j, k, _ in prefix.steps]
             trailing = None if prefix.trailing_depot is None else (prefix.last,
                                                                      prefix.trailing_depot)
+            leaves = moment.anchor(n)
             network = aav_network(instance, n, self.tasks,
                                   prefix_arrivals(instance, n, self.committed[n]), required,
-                                  trailing)
-            arrival = flown = None
-            if prefix.steps:
-                trace = self.evaluator.trace(n, self.committed[n])
-                k = max(i for i, v in enumerate(self.committed[n])
-                        if not instance.is_depot(v.node))
-                arrival, flown = trace.arrivals[k], trace.distance_at_arrival[k]
+                                  trailing, prefix.last, leaves.time)
             anchor = anchor_of(instance, n, self.committed[n], prefix.trailing_depot,
-                               prefix.last, arrival, flown)
+                               prefix.last, leaves)
             self.pricers.append(Pricer(instance, n, network, anchor, self.timed))
         self.identical = _identical(instance, self.committed)
 
@@ -218,6 +220,12 @@ class BranchPrice:
         self.columns: list[Column] = []
         self.by_key: dict[tuple[int, tuple[Visit, ...], frozenset[int]], Column] = {}
         self.robust: dict[tuple, tuple[int, int]] = {}  # decision key -> (row, artificial)
+        # The columns by (AAV, free task visited) and (AAV, free arc); the LP columns whose
+        # upper bound is 0 at the current node.
+        self.visiting: dict[tuple[int, int], list[Column]] = {}
+        self.using_arc: dict[tuple[int, Arc3], list[Column]] = {}
+        self.closed: set[int] = set()
+        self.columns_of: list[list[int]] = [[] for _ in range(n_aavs)]
         for n in range(n_aavs):
             self.add_column(n, ())
 
@@ -290,6 +298,11 @@ class BranchPrice:
             entries += [(self.closer[m], 1.0), (self.closer_time[m], -col.theta[m])]
         col.index = self._col(col.op, 0.0, self.inf, entries)
         self.columns.append(col)
+        self.columns_of[n].append(col.index)
+        for m in col.free_amounts:
+            self.visiting.setdefault((n, m), []).append(col)
+        for arc in col.arcs:
+            self.using_arc.setdefault((n, arc), []).append(col)
         self.by_key[n, tail, col.closes] = col
         return col
 
@@ -302,6 +315,27 @@ class BranchPrice:
             artificial = self._col(self.big, 0.0, 0.0, [(row, 1.0)])
             self.robust[key] = (row, artificial)
         return self.robust[key]
+
+    def basis(self) -> tuple[list, list]:
+        """The LP's current basis (column and row statuses)."""
+        basis = self.h.getBasis()
+        return list(basis.col_status), list(basis.row_status)
+
+    def restore_basis(self, saved: tuple[list, list] | None) -> None:
+        """Start the next LP from ``saved`` (a parent node's final basis): best-bound search
+        jumps across the tree, and from the last node's basis the first LP of a node took
+        hundreds of simplex iterations. Columns and rows added since are nonbasic at their
+        lower bound 0 and basic (slack) respectively, which keeps the basis square."""
+        import highspy
+
+        if saved is None:
+            return
+        cols, rows = saved
+        basis = highspy.HighsBasis()
+        basis.col_status = cols + [highspy.HighsBasisStatus.kLower] * (self.n_cols - len(cols))
+        basis.row_status = rows + [highspy.HighsBasisStatus.kBasic] * (self.n_rows - len(rows))
+        basis.valid = True
+        self.h.setBasis(basis)
 
     def solve_lp(self) -> tuple[float, np.ndarray, np.ndarray]:
         import highspy
@@ -344,9 +378,22 @@ class BranchPrice:
             on = key in active
             self.h.changeRowBounds(row, 1.0 if on else -self.inf, self.inf)
             self.h.changeColBounds(artificial, 0.0, self.inf if on else 0.0)
-        for col in self.columns:
-            ok = _compatible(col, restrictions[col.aav])
-            self.h.changeColBounds(col.index, 0.0, self.inf if ok else 0.0)
+        # Only the columns whose bound changes since the last node are touched: the ones
+        # each decision excludes are found through the visit and arc indexes.
+        closed = set()
+        for n, r in enumerate(restrictions):
+            for m in r.forbidden_tasks:
+                closed.update(c.index for c in self.visiting.get((n, m), ()))
+            for arc in r.forbidden_arcs:
+                closed.update(c.index for c in self.using_arc.get((n, arc), ()))
+            for m in {*r.amount_low, *r.amount_high}:
+                closed.update(c.index for c in self.visiting.get((n, m), ())
+                              if not _compatible(c, r))
+        for index in closed - self.closed:
+            self.h.changeColBounds(index, 0.0, 0.0)
+        for index in self.closed - closed:
+            self.h.changeColBounds(index, 0.0, self.inf)
+        self.closed = closed
         return restrictions
 
     def artificial_value(self, x: np.ndarray) -> float:
@@ -453,6 +500,7 @@ class BranchPrice:
                     continue
                 if not _compatible(col, restrictions[k]):
                     self.h.changeColBounds(col.index, 0.0, 0.0)
+                    self.closed.add(col.index)
                 elif k == n:
                     added += 1
         return added
@@ -485,7 +533,11 @@ class BranchPrice:
             frac = [(abs(v - 0.5), key) for key, v in sorted(values.items())
                     if INTEGRALITY < v < 1 - INTEGRALITY]
             if frac:
-                (k, key) = min(frac)[1]
+                if kind == "visit" and self.strong_candidates > 1 and len(frac) > 1:
+                    k, key = self.strongest([key for _, key in sorted(frac)
+                                             [:self.strong_candidates]])
+                else:
+                    (k, key) = min(frac)[1]
                 return Decision(kind, k, key, "0")
         frac = [(abs(v - math.floor(v) - 0.5), key) for key, v in sorted(amount.items())
                 if abs(v - round(v)) > INTEGRALITY]
@@ -499,6 +551,36 @@ class BranchPrice:
             routes.append(tuple(Visit(v.node, round(amount[n, v.node]))
                                 if v.node in cols[0].free_amounts else v for v in route))
         return tuple(routes)
+
+    def strongest(self, candidates: list[tuple[int, int]]) -> tuple[int, int]:
+        """Of the (AAV, task) visit candidates, the one whose two children's LPs over the
+        present columns (no pricing: a score, not a bound) rise the most, by the product of
+        the two rises. The LP is left as it was (bounds and basis)."""
+        import highspy
+
+        value = self.h.getInfo().objective_function_value
+        saved = self.basis()
+        best, best_score = candidates[0], -math.inf
+        for k, m in candidates:
+            visiting = {c.index for c in self.visiting.get((k, m), ())}
+            rises = []
+            for close in (visiting, set(self.columns_of[k]) - visiting):
+                newly = np.array(sorted(close - self.closed), np.int32)
+                if len(newly):
+                    self.h.changeColsBounds(len(newly), newly, np.zeros(len(newly)),
+                                            np.zeros(len(newly)))
+                self.h.run()
+                ok = self.h.getModelStatus() == highspy.HighsModelStatus.kOptimal
+                child = self.h.getInfo().objective_function_value if ok else math.inf
+                rises.append(max(child - value, 1e-9))
+                if len(newly):
+                    self.h.changeColsBounds(len(newly), newly, np.zeros(len(newly)),
+                                            np.full(len(newly), self.inf))
+                self.restore_basis(saved)
+            score = rises[0] * rises[1]
+            if score > best_score:
+                best, best_score = (k, m), score
+        return best
 
     def root(self, time_limit: float | None = None) -> dict[str, float]:
         """The root LP by column generation alone (no incumbent, no branching): its value,
@@ -517,10 +599,10 @@ class BranchPrice:
               log: Callable[[str], None] | None = None) -> BranchPriceResult:
         began = time.perf_counter()
         deadline = math.inf if time_limit is None else began + time_limit
-        clock = {"lp": 0.0, "pricing": 0.0}
+        clock = {"lp": 0.0, "pricing": 0.0, "branching": 0.0}
         instance = self.instance
         free = [len(p) for p in self.committed]
-        best_routes = canonical_routes(instance, incumbent, free)
+        best_routes = canonical_routes(instance, incumbent, free, self.plan_time)
         best_J = self.evaluator.cost(best_routes)
         # The incumbent's columns, each task closed by its latest member (its J exactly).
         latest: dict[int, tuple[float, int]] = {}
@@ -534,7 +616,9 @@ class BranchPrice:
             if tail:
                 self.add_column(n, tail, frozenset(m for m, (_, k) in latest.items() if k == n))
         counter = itertools.count()
-        queue: list[tuple[float, int, tuple[Decision, ...]]] = [(-math.inf, next(counter), ())]
+        # Open nodes: (bound, tie-break, decisions, the parent's final LP basis or None).
+        queue: list[tuple[float, int, tuple[Decision, ...], Any]] = [
+            (-math.inf, next(counter), (), None)]
         nodes = 0
         root_bound = None
         global_bound = -math.inf
@@ -545,15 +629,16 @@ class BranchPrice:
             return PRUNE_TOLERANCE * max(1.0, abs(J))
 
         while queue:
-            bound, _, decisions = heapq.heappop(queue)
+            bound, _, decisions, basis = heapq.heappop(queue)
             if bound >= best_J - tolerance(best_J):
                 continue
             if time.perf_counter() >= deadline:
-                heapq.heappush(queue, (bound, next(counter), decisions))
+                heapq.heappush(queue, (bound, next(counter), decisions, basis))
                 status, stop_reason = "feasible", "time limit"
                 break
             nodes += 1
             restrictions = self.apply(decisions)
+            self.restore_basis(basis)
             value, node_bound, x, converged = self.column_generation(
                 restrictions, best_J, deadline, clock)
             node_bound = max(node_bound, bound)
@@ -566,19 +651,22 @@ class BranchPrice:
             if node_bound >= best_J - tolerance(best_J):
                 continue
             if not converged:  # the deadline: keep the node open with its bound
-                heapq.heappush(queue, (node_bound, next(counter), decisions))
+                heapq.heappush(queue, (node_bound, next(counter), decisions, basis))
                 continue
             if self.artificial_value(x) > 1e-9:
                 continue  # infeasible node
+            choosing = time.perf_counter()
             choice = self.branching_candidates(x)
+            clock["branching"] += time.perf_counter() - choosing
             if isinstance(choice, Decision):
                 if choice.kind == "amount":
                     sides = [choice, Decision("amount", choice.aav, choice.key, "ge",
                                               choice.value + 1)]
                 else:
                     sides = [choice, Decision(choice.kind, choice.aav, choice.key, "1")]
+                basis = self.basis()
                 for side in sides:
-                    heapq.heappush(queue, (node_bound, next(counter), (*decisions, side)))
+                    heapq.heappush(queue, (node_bound, next(counter), (*decisions, side), basis))
                 if log:
                     log(f"node {nodes}: LP {value:.6f} bound {node_bound:.6f} "
                         f"best {best_J:.6f} branch {choice}")
@@ -589,7 +677,7 @@ class BranchPrice:
             if value + 1e-6 * max(1.0, abs(value)) < J:
                 status, stop_reason = "error", (f"integral LP {value} but its plan has J {J}")
                 break
-        open_bounds = [b for b, _, _ in queue]
+        open_bounds = [b for b, _, _, _ in queue]
         global_bound = min([best_J, *open_bounds]) if status != "optimal" else best_J
         if status == "feasible" and not open_bounds:
             status, stop_reason = "optimal", "optimal"
@@ -604,7 +692,8 @@ class BranchPrice:
             "columns": len(self.columns),
             "lp_time": clock["lp"],
             "pricing_time": clock["pricing"],
-            "other_time": time.perf_counter() - began - clock["lp"] - clock["pricing"],
+            "branching_time": clock["branching"],
+            "other_time": time.perf_counter() - began - sum(clock.values()),
             "wall_time": time.perf_counter() - began,
         }
         return BranchPriceResult(tuple(best_routes), best_J, _finite(global_bound), status, stats)

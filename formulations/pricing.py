@@ -3,28 +3,28 @@ the schedule (visits, depot reloads, amounts) of least reduced cost, by labellin
 
 A label is a partial schedule from the AAV's anchor (its start, or the end of its committed
 prefix) that ends at a task. Its resources are the clock, the distance flown (Dcum), the set
-of tasks visited, and the load state of the current trip:
-* ``peak``: the least capacity the trip needs so far. Eq. 10 asks d + p <= B after every
-  visit, and d after visit i is the delivery goods still to come in the trip, so the trip is
-  feasible iff (goods delivered in the trip) + max_i (p_i - delivered_i) <= B; peak is that
-  left-hand side so far: a delivery of a adds a to it, a pickup raises it to at least the
-  pickup goods on board;
-* ``pickup``: the pickup goods on board (what later pickups add to);
-* ``loaded``: whether the trip began at a depot (a delivery needs goods from a depot).
-A depot visit starts a new trip (peak = pickup = 0, loaded). Amounts are chosen when a task is
-added: every integer in the allowed range is a separate label, since the reduced cost is
-linear in the amount but the load it uses limits what comes later.
+of tasks visited, whether the current trip began at a depot (``loaded``: a delivery needs
+goods from a depot), and the load state of the current trip, kept for every amount choice at
+once in a table (``Pricer``): ``peak``, the least capacity the trip needs so far (Eq. 10 asks
+d + p <= B after every visit, and d after visit i is the delivery goods still to come in the
+trip, so the trip is feasible iff (goods delivered in the trip) + max_i (p_i - delivered_i)
+<= B; peak is that left-hand side so far: a delivery of a adds a to it, a pickup raises it to
+at least the pickup goods on board), and ``pickup``, the pickup goods on board. A depot visit
+starts a new trip (peak = pickup = 0, loaded).
 
 The reduced cost adds, per task visit, terms that depend only on that visit's arrival, amount
 and leg (``TaskPrices``), so it is a sum along the path. Label L1 dominates L2 at the same
 node when every completion of L2 is a completion of L1 at no higher reduced cost:
-  cost1 <= cost2, clock1 <= clock2 (every later arrival is no later; every price term is
-  non-decreasing in the arrival since the time-row duals are >= 0), visited1 subset of
-  visited2 (elementarity), peak1 <= peak2, pickup1 <= pickup2, loaded1 >= loaded2, and
+  table1 <= table2 in every cell (so cost1 <= cost2), clock1 <= clock2 (every later arrival is
+  no later; every price term is non-decreasing in the arrival since the time-row duals are
+  >= 0), visited1 subset of visited2 (elementarity), loaded1 >= loaded2, and
   Dcum: both beyond the range (every later visit pays the full-range cost), or Dcum1 <= Dcum2
   when the full-range cost is at least the cost of any leg (q is then non-decreasing in Dcum),
   or Dcum1 == Dcum2 otherwise.
-Arrival and Dcum are accumulated leg by leg in the evaluator's order of float operations.
+Arrival and Dcum are accumulated leg by leg in the evaluator's order of float operations, so
+a schedule's arrivals (hence its time-window feasibility and price) are the evaluator's to
+the last bit. The labelling runs compiled (numba): pricing is nearly all of the search's
+time otherwise.
 """
 
 from __future__ import annotations
@@ -33,9 +33,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from tsac_bench.formulations.network import DIRECT, START, AavNetwork
 from tsac_bench.model import Instance, Route, Visit
+from tsac_bench.planning import Anchor as PlanningAnchor
 
 
 @dataclass
@@ -70,13 +72,15 @@ class Anchor:
     """Where the free part of an AAV's schedule starts: after its committed prefix."""
 
     node: int  # START or the last committed task
-    clock: float
-    flown: float
+    clock: float  # when the AAV can leave for its first free visit (MODEL.md, "Time")
+    flown: float  # Dcum when it leaves
     visited: int  # bit mask of committed tasks
     peak: int
     pickup: int
     loaded: bool
-    skip_depot_visit: bool  # the first free arc's depot is the prefix's trailing depot
+    #: The prefix ends with a depot visit the AAV has not left: it leaves from that depot,
+    #: and its first free arc (through that depot) has only the leg from it to fly.
+    skip_depot_visit: bool
 
 
 @dataclass
@@ -86,18 +90,6 @@ class Schedule:
 
     tail: tuple[Visit, ...]
     reduced_cost: float
-
-
-class _Label:
-    __slots__ = ("alive", "amounts", "arc", "clock", "cost", "flown", "loaded", "node", "parent",
-                 "price", "table", "visited")
-
-    def __init__(self, node, clock, flown, visited, loaded, table, parent, arc, price, amounts):
-        self.node, self.clock, self.flown, self.visited = node, clock, flown, visited
-        self.loaded, self.table = loaded, table
-        self.parent, self.arc, self.price, self.amounts = parent, arc, price, amounts
-        self.alive = True
-        self.cost = float(table[-1, -1])  # the reduced cost of the finished schedule
 
 
 class Pricer:
@@ -112,6 +104,10 @@ class Pricer:
     amount vector of its path, and label L1 dominates L2 only if table1 <= table2 everywhere
     (with the other resources as above); the reduced cost of a finished schedule is
     table[B, B]; the amounts are read back cell by cell from the parents' tables.
+
+    The labelling itself is compiled (``_labelling``, numba); this class turns the network,
+    the duals and the branching restrictions into its arrays and the labels it returns into
+    schedules.
     """
 
     def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: Anchor,
@@ -137,232 +133,440 @@ class Pricer:
         self.out: dict[int, list] = {}
         for a in network.arcs:
             p = start if a.tail == START else a.tail
-            legs = (dist[p][a.head], None) if a.mode == DIRECT else (dist[p][a.mode],
-                                                                      dist[a.mode][a.head])
+            if a.mode == DIRECT:
+                legs = (dist[p][a.head], None)
+            elif a.tail == anchor.node and anchor.skip_depot_visit:
+                # The AAV waits at this depot: the leg from it is left, in the fresh trip
+                # the anchor's load state already describes.
+                legs = (dist[a.mode][a.head], None)
+            else:
+                legs = (dist[p][a.mode], dist[a.mode][a.head])
             self.out.setdefault(a.tail, []).append((a.tail, a.head, a.mode, *legs))
         self.t_start = {j: float(instance.tasks[j].t_start) for j in network.tasks}
         self.t_end = {j: instance.tasks[j].latest_on_time for j in network.tasks}
         self.demand = {j: instance.tasks[j].demand for j in network.tasks}
         self.delivery = {j: instance.tasks[j].is_delivery for j in network.tasks}
         self.horizon = float(instance.horizon)
-        cells = np.arange(self.capacity + 1)
-        self._rows = cells[:, None].repeat(self.capacity + 1, axis=1)
-        self._smaller = np.minimum.outer(cells, cells)
+        # The compiled labelling's view: node n_tasks is START; arcs grouped by tail (CSR).
+        n_tasks = instance.n_tasks
+        self._start_node = n_tasks
+        self.arcs = [arc for tail in sorted(self.out, key=self._node) for arc in self.out[tail]]
+        self.arc_index = {arc[:3]: i for i, arc in enumerate(self.arcs)}
+        first = np.zeros(n_tasks + 2, np.int64)
+        for arc in self.arcs:
+            first[self._node(arc[0]) + 1] += 1
+        self._out_first = np.cumsum(first)
+        self._arc_head = np.array([a[1] for a in self.arcs], np.int64)
+        self._arc_leg1 = np.array([a[3] for a in self.arcs], float)
+        self._arc_leg2 = np.array([0.0 if a[4] is None else a[4] for a in self.arcs], float)
+        self._arc_depot = np.array([a[4] is not None for a in self.arcs], np.bool_)
+        t_start = np.zeros(n_tasks)
+        t_end = np.full(n_tasks, -np.inf)  # tasks off the network: never reached
+        demand = np.zeros(n_tasks, np.int64)
+        delivery = np.zeros(n_tasks, np.bool_)
+        for j in network.tasks:
+            t_start[j], t_end[j] = self.t_start[j], self.t_end[j]
+            demand[j], delivery[j] = self.demand[j], self.delivery[j]
+        self._t_start, self._t_end, self._demand, self._is_delivery = (t_start, t_end, demand,
+                                                                       delivery)
+        self._timed = np.array([j in timed for j in range(n_tasks)], np.bool_)
+        words = max(1, (n_tasks + 63) // 64)
+        self._anchor_visited = np.array(
+            [_signed_word((anchor.visited >> (64 * w)) & (2**64 - 1)) for w in range(words)],
+            np.int64)
 
-    def _root_table(self, base: float) -> np.ndarray:
-        table = np.full((self.capacity + 1, self.capacity + 1), np.inf)
-        table[self.anchor.peak:, self.anchor.pickup:] = base
-        return table
-
-    def _visit(self, table: np.ndarray, delivery: bool, price: float, low: int, high: int
-               ) -> np.ndarray:
-        """The table after a visit with amounts low..high at ``price`` per kg.
-
-        min over a of T(c - a) - price * a is a sliding-window minimum of T(z) + price * z
-        (window c - high .. c - low) less price * c, taken along the peak axis for a delivery
-        and along the pickup axis for a pickup (whose goods also raise the peak: the pickup
-        cell used is min(x, y))."""
-        size = self.capacity + 1
-        axis = 0 if delivery else 1
-        cells = np.arange(size, dtype=float)
-        ramp = price * (cells[:, None] if delivery else cells[None, :])
-        shifted = table + ramp
-        pad_shape = (high, size) if delivery else (size, high)
-        window = np.concatenate([np.full(pad_shape, np.inf), shifted], axis=axis)
-        length, span = high - low + 1, 1
-        while 2 * span <= length:
-            window = np.minimum(_take(window, 0, -span, axis), _take(window, span, None, axis))
-            span *= 2
-        out = np.minimum(_take(window, 0, size, axis),
-                         _take(window, length - span, length - span + size, axis)) - ramp
-        if not delivery:
-            out = out[self._rows, self._smaller]
-        return out
-
-    def _first_visit(self, least: float, delivery: bool, price: float, low: int, high: int
-                     ) -> np.ndarray:
-        """``_visit`` of a table that is ``least`` everywhere (the first visit of a trip):
-        the largest amount the cell allows, up to ``high``, at least ``low``."""
-        room = self._rows if delivery else self._smaller
-        return np.where(room >= low, least - price * np.minimum(room, high), np.inf)
+    def _node(self, node: int) -> int:
+        return self._start_node if node == START else node
 
     def price(self, prices: TaskPrices, restrictions: Restrictions, *, limit: int = 50,
               label_cap: int | None = None) -> tuple[float, list[Schedule]]:
         """(least reduced cost, up to ``limit`` schedules of negative reduced cost, least
         first). With ``label_cap`` only the cheapest labels per node and length are kept: a
         heuristic whose least reduced cost is then not a bound."""
+        n_tasks, size = self.instance.n_tasks, self.capacity + 1
+
+        def per_task(values: dict[int, float]) -> np.ndarray:
+            out = np.zeros(n_tasks)
+            for m, v in values.items():
+                out[m] = v
+            return out
+
+        arc_bonus = np.zeros(len(self.arcs))
+        for key, v in prices.arc_bonus.items():
+            if key in self.arc_index:
+                arc_bonus[self.arc_index[key]] = v
+        forbidden_arc = np.zeros(len(self.arcs), np.bool_)
+        for key in restrictions.forbidden_arcs:
+            if key in self.arc_index:
+                forbidden_arc[self.arc_index[key]] = True
+        forbidden_task = np.zeros(n_tasks, np.bool_)
+        forbidden_task[list(restrictions.forbidden_tasks)] = True
+        low = np.ones(n_tasks, np.int64)
+        high = np.full(n_tasks, self.capacity, np.int64)
+        for m, v in restrictions.amount_low.items():
+            low[m] = v
+        for m, v in restrictions.amount_high.items():
+            high[m] = v
+        root = np.full((size, size), np.inf)
+        root[self.anchor.peak:, self.anchor.pickup:] = prices.base
         anchor = self.anchor
-        root = _Label(anchor.node, anchor.clock, anchor.flown, anchor.visited, anchor.loaded,
-                      self._root_table(prices.base), None, None, 0.0, (0, 0))
-        best = [root]
-        buckets: dict[int, list[_Label]] = {}
-        frontier = [root]
-        forbidden_tasks = restrictions.forbidden_tasks
-        forbidden_arcs = restrictions.forbidden_arcs
-        low, high = restrictions.amount_low, restrictions.amount_high
-        speed, capacity, max_range = self.speed, self.capacity, self.max_range
-        per_metre, full = self.per_metre, self.full
-        t_start, t_end, horizon = self.t_start, self.t_end, self.horizon
-        timed = self.timed
-        cover, aav_time = prices.cover, prices.aav_time
-        closer, closer_time = prices.closer, prices.closer_time
-        visit_bonus, arc_bonus = prices.visit_bonus, prices.arc_bonus
-        cut_bonus = prices.cut_bonus
-        while frontier:
-            produced: list[_Label] = []
-            for label in frontier:
-                if not label.alive:
-                    continue
-                for arc in self.out.get(label.node, ()):
-                    _, j, _, leg1, leg2 = arc
-                    bit = 1 << j
-                    if label.visited & bit or j in forbidden_tasks or arc[:3] in forbidden_arcs:
-                        continue
-                    clock, flown = label.clock, label.flown
-                    flown += leg1
-                    clock += leg1 / speed
-                    table, loaded, leg = label.table, label.loaded, leg1
-                    if leg2 is not None:
-                        flown += leg2
-                        clock += leg2 / speed
-                        table = None  # a new trip: the old table collapses to its least value
-                        loaded, leg = True, leg2
-                    if clock < t_start[j]:
-                        clock = t_start[j]
-                    if clock > t_end[j]:
-                        continue
-                    is_delivery = self.delivery[j]
-                    if is_delivery and not loaded:
-                        continue
-                    cost = per_metre * leg if flown <= max_range else full
-                    cost -= visit_bonus.get(j, 0.0) + arc_bonus.get(arc[:3], 0.0)
-                    cost -= cut_bonus.get(j, 0.0)
-                    if j in timed:
-                        theta = (clock - t_start[j]) / horizon
-                        cost += aav_time.get(j, 0.0) * theta
-                        cost += min(0.0, closer_time.get(j, 0.0) * theta - closer.get(j, 0.0))
-                    a_low = low.get(j, 1)
-                    a_high = min(self.demand[j], capacity, high.get(j, capacity))
-                    price = cover.get(j, 0.0)
-                    # With no value on goods, more than the least amount only uses capacity.
-                    if price <= 0.0:
-                        a_high = min(a_high, a_low)
-                    if a_high < a_low:
-                        continue
-                    if table is None:
-                        new_table = self._first_visit(label.cost, is_delivery, price, a_low,
-                                                      a_high)
-                    else:
-                        new_table = self._visit(table, is_delivery, price, a_low, a_high)
-                    if not np.isfinite(new_table[-1, -1]):
-                        continue
-                    new_table += cost
-                    child = _Label(j, clock, flown, label.visited | bit, loaded, new_table,
-                                   label, arc, price, (a_low, a_high))
-                    if self._insert(buckets.setdefault(j, []), child):
-                        produced.append(child)
-            if label_cap is not None:
-                produced = self._cap(produced, label_cap)
-            frontier = produced
-            best.extend(produced)
-        least = min(lab.cost for lab in best)
-        alive = sorted((lab for lab in best if lab.alive), key=lambda lab: lab.cost)
+        labels = _labelling(
+            self._out_first, self._arc_head, self._arc_leg1, self._arc_leg2, self._arc_depot,
+            self._t_start, self._t_end, self._demand, self._is_delivery, self._timed,
+            self.speed, self.capacity, self.max_range, self.per_metre, self.full,
+            self.dcum_monotone, self.horizon,
+            self._node(anchor.node), anchor.clock, anchor.flown, self._anchor_visited,
+            anchor.loaded, root,
+            per_task(prices.cover), per_task(prices.aav_time), per_task(prices.closer),
+            per_task(prices.closer_time), per_task(prices.visit_bonus),
+            per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
+            0 if label_cap is None else label_cap)
+        cost, alive = labels[0], labels[1]
+        least = float(cost.min())
         chosen, seen = [], set()
-        for lab in alive:
-            if lab.cost >= -1e-9 or len(chosen) >= limit:
+        for k in np.flatnonzero(alive)[np.argsort(cost[alive], kind="stable")]:
+            if cost[k] >= -1e-9 or len(chosen) >= limit:
                 break
-            tail = self._tail(lab)
+            tail = self._tail(int(k), labels)
             if tail not in seen:
                 seen.add(tail)
-                chosen.append(Schedule(tail, lab.cost))
+                chosen.append(Schedule(tail, float(cost[k])))
         return least, chosen
 
-    @staticmethod
-    def _cap(labels: list[_Label], cap: int) -> list[_Label]:
-        by_node: dict[int, list[_Label]] = {}
-        for lab in labels:
-            if lab.alive:
-                by_node.setdefault(lab.node, []).append(lab)
-        kept = []
-        for group in by_node.values():
-            group.sort(key=lambda lab: lab.cost)
-            for lab in group[cap:]:
-                lab.alive = False
-            kept += group[:cap]
-        return kept
-
-    def _dominates(self, a: _Label, b: _Label) -> bool:
-        """The rule of the class docstring; the cheap scalar tests go first (the table test
-        needs cost_a <= cost_b, its cell (B, B))."""
-        if a.clock > b.clock or a.cost > b.cost or (b.loaded and not a.loaded) or (
-                a.visited & ~b.visited):
-            return False
-        if not (a.flown > self.max_range and b.flown > self.max_range) and not (
-                a.flown <= b.flown if self.dcum_monotone else a.flown == b.flown):
-            return False
-        return bool((a.table <= b.table).all())
-
-    def _insert(self, bucket: list[_Label], child: _Label) -> bool:
-        dominates = self._dominates
-        for other in bucket:
-            if other.alive and dominates(other, child):
-                return False
-        dropped = False
-        for other in bucket:
-            if other.alive and dominates(child, other):
-                other.alive = False
-                dropped = True
-        if dropped:
-            bucket[:] = [lab for lab in bucket if lab.alive]
-        bucket.append(child)
-        return True
-
-    def _tail(self, label: _Label) -> tuple[Visit, ...]:
+    def _tail(self, label: int, labels: tuple) -> tuple[Visit, ...]:
         """The free visits of a finished label, amounts read back from the cell (B, B): at
         each visit the amount that attains the cell's minimum in the parent's table."""
+        cost, _, node, parent, arc, price, low, high, tables = labels
         steps = []
-        while label.parent is not None:
+        while parent[label] >= 0:
             steps.append(label)
-            label = label.parent
+            label = parent[label]
         x = y = self.capacity
         amounts = []
         for lab in steps:  # last visit first
-            before = lab.parent.table
-            if lab.arc[4] is not None:  # through a depot: the parent's trip is closed
-                before = np.full_like(before, before[-1, -1])
-            low, high = lab.amounts
-            if self.delivery[lab.node]:
-                options = [(before[x - a, y] - lab.price * a, a) for a in range(low, high + 1)
-                           if x - a >= 0]
-                a = min(options)[1]
+            before = tables[parent[lab]]
+            new_trip = self._arc_depot[arc[lab]]
+            if new_trip:  # through a depot: the parent's trip is closed
+                before = np.full_like(before, cost[parent[lab]])
+            amount_range = range(low[lab], high[lab] + 1)
+            if self.delivery[node[lab]]:
+                a = min((before[x - a, y] - price[lab] * a, a) for a in amount_range
+                        if x - a >= 0)[1]
                 x -= a
             else:
                 z = min(x, y)
-                options = [(before[x, z - a] - lab.price * a, a) for a in range(low, high + 1)
-                           if z - a >= 0]
-                a = min(options)[1]
+                a = min((before[x, z - a] - price[lab] * a, a) for a in amount_range
+                        if z - a >= 0)[1]
                 y = z - a
             amounts.append(a)
-            if lab.arc[4] is not None:
+            if new_trip:
                 x = y = self.capacity
         steps.reverse()
         amounts.reverse()
         visits: list[Visit] = []
         for k, (lab, a) in enumerate(zip(steps, amounts, strict=True)):
-            mode = lab.arc[2]
+            mode = self.arcs[arc[lab]][2]
             if mode != DIRECT and not (k == 0 and self.anchor.skip_depot_visit):
                 visits.append(Visit(mode))
-            visits.append(Visit(lab.node, a))
+            visits.append(Visit(int(node[lab]), a))
         return tuple(visits)
 
 
-def _take(array: np.ndarray, start: int, stop: int | None, axis: int) -> np.ndarray:
-    return array[start:stop] if axis == 0 else array[:, start:stop]
+def _signed_word(word: int) -> int:
+    """An unsigned 64-bit word as the int64 with the same bits (the kernel's bit sets)."""
+    return word - 2**64 if word >= 2**63 else word
+
+
+# --- the compiled labelling ---------------------------------------------------------------
+# Labels live in arrays that double when full; a label is an index. Buckets hold the live
+# labels of each node for the dominance tests.
+
+@njit(cache=True)
+def _grown1(a, size):
+    out = np.empty(size, a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _grown2(a, size):
+    out = np.empty((size, a.shape[1]), a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _grown3(a, size):
+    out = np.empty((size, a.shape[1], a.shape[2]), a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _wider(a, columns):
+    out = np.empty((a.shape[0], columns), a.dtype)
+    out[:, :a.shape[1]] = a
+    return out
+
+
+@njit(cache=True)
+def _visit_table(src, dst, delivery, price, low, high, scratch_i, scratch_v, row):
+    """dst = src after a visit with amounts low..high at ``price`` per kg:
+    min over a of src(c - a) - price * a, as a sliding-window minimum (monotone queue) of
+    src(z) + price * z over z in c - high .. c - low, less price * c; along the peak axis
+    for a delivery, along the pickup axis for a pickup, whose cell used is min(x, y) (its
+    goods also raise the peak)."""
+    size = src.shape[0]
+    for outer in range(size):
+        head = tail = 0
+        for c in range(size):
+            z = c - low
+            if z >= 0:
+                v = (src[z, outer] if delivery else src[outer, z]) + price * z
+                while tail > head and scratch_v[tail - 1] >= v:
+                    tail -= 1
+                scratch_i[tail] = z
+                scratch_v[tail] = v
+                tail += 1
+            while tail > head and scratch_i[head] < c - high:
+                head += 1
+            best = scratch_v[head] - price * c if tail > head else np.inf
+            if delivery:
+                dst[c, outer] = best
+            else:
+                row[c] = best
+        if not delivery:
+            for y in range(size):
+                dst[outer, y] = row[min(outer, y)]
+
+
+@njit(cache=True)
+def _first_visit_table(dst, least, delivery, price, low, high):
+    """The visit's table when the trip starts at a depot right before it (every cell of the
+    old table is ``least``): the largest amount the cell allows, up to ``high``."""
+    size = dst.shape[0]
+    for x in range(size):
+        for y in range(size):
+            room = x if delivery else min(x, y)
+            dst[x, y] = least - price * min(room, high) if room >= low else np.inf
+
+
+@njit(cache=True)
+def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone):
+    """The rule of the module docstring; the cheap scalar tests go first (the table test
+    needs cost_a <= cost_b, its cell (B, B))."""
+    if clock[a] > clock[b] or cost[a] > cost[b] or (loaded[b] and not loaded[a]):
+        return False
+    for w in range(visited.shape[1]):
+        if visited[a, w] & ~visited[b, w]:
+            return False
+    if not (flown[a] > max_range and flown[b] > max_range):
+        if dcum_monotone:
+            if flown[a] > flown[b]:
+                return False
+        elif flown[a] != flown[b]:
+            return False
+    # Cells with y > x repeat (x, x): a trip's pickup goods never exceed its peak, so
+    # pickup <= y adds nothing to peak <= x there.
+    ta, tb = tables[a], tables[b]
+    for x in range(ta.shape[0]):
+        for y in range(x + 1):
+            if ta[x, y] > tb[x, y]:
+                return False
+    return True
+
+
+@njit(cache=True)
+def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
+               t_start, t_end, demand, is_delivery, timed,
+               speed, capacity, max_range, per_metre, full, dcum_monotone, horizon,
+               anchor_node, anchor_clock, anchor_flown, anchor_visited, anchor_loaded, root,
+               cover, aav_time, closer, closer_time, visit_bonus, cut_bonus, arc_bonus,
+               forbidden_task, forbidden_arc, amount_low, amount_high, label_cap):
+    """Every undominated label from the anchor, extended path length by path length (with
+    ``label_cap`` > 0 only the cheapest that many per node and length go on).
+
+    Returns (cost, alive, node, parent, arc, price, low, high, tables), one entry per
+    label, the root first (parent -1). Arrival and Dcum are accumulated leg by leg in the
+    evaluator's order of float operations, so a label's clock is the evaluator's arrival."""
+    size = capacity + 1
+    n_nodes = out_first.shape[0] - 1
+    words = anchor_visited.shape[0]
+    room = 1024
+    node = np.empty(room, np.int64)
+    parent = np.empty(room, np.int64)
+    arc_of = np.empty(room, np.int64)
+    price_of = np.empty(room)
+    low_of = np.empty(room, np.int64)
+    high_of = np.empty(room, np.int64)
+    clock = np.empty(room)
+    flown = np.empty(room)
+    cost = np.empty(room)
+    alive = np.empty(room, np.bool_)
+    loaded = np.empty(room, np.bool_)
+    visited = np.empty((room, words), np.int64)
+    tables = np.empty((room, size, size))
+    node[0], parent[0], arc_of[0], price_of[0], low_of[0], high_of[0] = anchor_node, -1, -1, \
+        0.0, 0, 0
+    clock[0], flown[0], alive[0], loaded[0] = anchor_clock, anchor_flown, True, anchor_loaded
+    visited[0] = anchor_visited
+    tables[0] = root
+    cost[0] = root[size - 1, size - 1]
+    count = 1
+    bucket = np.empty((n_nodes, 64), np.int64)
+    bucket_clock = np.empty((n_nodes, 64))
+    bucket_cost = np.empty((n_nodes, 64))
+    bucket_len = np.zeros(n_nodes, np.int64)
+    frontier = np.zeros(1, np.int64)
+    scratch_i = np.empty(size, np.int64)
+    scratch_v = np.empty(size)
+    row = np.empty(size)
+    while frontier.shape[0] > 0:
+        produced = np.empty(16, np.int64)
+        n_produced = 0
+        for lab in frontier:
+            if not alive[lab]:
+                continue
+            here = node[lab]
+            for a in range(out_first[here], out_first[here + 1]):
+                j = arc_head[a]
+                if (visited[lab, j >> 6] >> (j & 63)) & 1 or forbidden_task[j] \
+                        or forbidden_arc[a]:
+                    continue
+                t, f = clock[lab], flown[lab]
+                leg = arc_leg1[a]
+                f += leg
+                t += leg / speed
+                new_trip, has_goods = arc_depot[a], loaded[lab]
+                if new_trip:
+                    leg = arc_leg2[a]
+                    f += leg
+                    t += leg / speed
+                    has_goods = True
+                if t < t_start[j]:
+                    t = t_start[j]
+                if t > t_end[j]:
+                    continue
+                if is_delivery[j] and not has_goods:
+                    continue
+                c = per_metre * leg if f <= max_range else full
+                c -= visit_bonus[j] + arc_bonus[a]
+                c -= cut_bonus[j]
+                if timed[j]:
+                    theta = (t - t_start[j]) / horizon
+                    c += aav_time[j] * theta
+                    c += min(0.0, closer_time[j] * theta - closer[j])
+                a_low = amount_low[j]
+                a_high = min(demand[j], capacity, amount_high[j])
+                p = cover[j]
+                # With no value on goods, more than the least amount only uses capacity.
+                if p <= 0.0:
+                    a_high = min(a_high, a_low)
+                if a_high < a_low:
+                    continue
+                if count == node.shape[0]:
+                    room = 2 * count
+                    node, parent, arc_of = (_grown1(node, room), _grown1(parent, room),
+                                            _grown1(arc_of, room))
+                    price_of, low_of, high_of = (_grown1(price_of, room),
+                                                 _grown1(low_of, room), _grown1(high_of, room))
+                    clock, flown, cost = (_grown1(clock, room), _grown1(flown, room),
+                                          _grown1(cost, room))
+                    alive, loaded = _grown1(alive, room), _grown1(loaded, room)
+                    visited, tables = _grown2(visited, room), _grown3(tables, room)
+                k = count
+                if new_trip:
+                    _first_visit_table(tables[k], cost[lab], is_delivery[j], p, a_low, a_high)
+                else:
+                    _visit_table(tables[lab], tables[k], is_delivery[j], p, a_low, a_high,
+                                 scratch_i, scratch_v, row)
+                if not np.isfinite(tables[k, size - 1, size - 1]):
+                    continue
+                tables[k] += c
+                node[k], parent[k], arc_of[k], price_of[k] = j, lab, a, p
+                low_of[k], high_of[k] = a_low, a_high
+                clock[k], flown[k], cost[k] = t, f, tables[k, size - 1, size - 1]
+                alive[k], loaded[k] = True, has_goods
+                visited[k] = visited[lab]
+                visited[k, j >> 6] |= np.int64(1) << (j & 63)
+                # Dominance within the bucket of node j; its labels' clocks and costs are
+                # kept side by side so that the scan reads contiguous memory and tests the
+                # tables only where those two allow dominance.
+                members = bucket_len[j]
+                rejected = False
+                for i in range(members):
+                    if bucket_clock[j, i] <= t and bucket_cost[j, i] <= cost[k]:
+                        other = bucket[j, i]
+                        if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
+                                                       flown, tables, max_range,
+                                                       dcum_monotone):
+                            rejected = True
+                            break
+                if rejected:
+                    continue
+                kept = 0
+                for i in range(members):
+                    other = bucket[j, i]
+                    if not alive[other]:
+                        continue
+                    if bucket_clock[j, i] >= t and bucket_cost[j, i] >= cost[k] and \
+                            _dominates(k, other, clock, cost, loaded, visited, flown, tables,
+                                       max_range, dcum_monotone):
+                        alive[other] = False
+                        continue
+                    bucket[j, kept] = other
+                    bucket_clock[j, kept] = bucket_clock[j, i]
+                    bucket_cost[j, kept] = bucket_cost[j, i]
+                    kept += 1
+                if kept == bucket.shape[1]:
+                    bucket = _wider(bucket, 2 * kept)
+                    bucket_clock = _wider(bucket_clock, 2 * kept)
+                    bucket_cost = _wider(bucket_cost, 2 * kept)
+                bucket[j, kept] = k
+                bucket_clock[j, kept] = t
+                bucket_cost[j, kept] = cost[k]
+                bucket_len[j] = kept + 1
+                count += 1
+                if n_produced == produced.shape[0]:
+                    produced = _grown1(produced, 2 * n_produced)
+                produced[n_produced] = k
+                n_produced += 1
+        frontier = produced[:n_produced].copy()
+        if label_cap > 0:
+            frontier = _cheapest_per_node(frontier, node, cost, alive, label_cap, n_nodes)
+    return (cost[:count], alive[:count], node[:count], parent[:count], arc_of[:count],
+            price_of[:count], low_of[:count], high_of[:count], tables[:count])
+
+
+@njit(cache=True)
+def _cheapest_per_node(labels, node, cost, alive, cap, n_nodes):
+    """The live ``labels`` that are among the ``cap`` cheapest of their node (ties: the
+    earlier label); the others are marked dead (the heuristic label budget)."""
+    order = np.argsort(cost[labels], kind="mergesort")
+    taken = np.zeros(n_nodes, np.int64)
+    keep = np.zeros(labels.shape[0], np.bool_)
+    for i in order:
+        lab = labels[i]
+        if not alive[lab]:
+            continue
+        if taken[node[lab]] < cap:
+            taken[node[lab]] += 1
+            keep[i] = True
+        else:
+            alive[lab] = False
+    return labels[keep]
 
 
 def anchor_of(instance: Instance, n: int, prefix: Route, trailing_depot: int | None,
-              last: int, arrival: float | None, flown: float | None) -> Anchor:
-    """The anchor after AAV n's committed ``prefix`` (walked for its current trip's load)."""
+              last: int, leaves: PlanningAnchor) -> Anchor:
+    """The anchor after AAV n's committed ``prefix`` (walked for its current trip's load),
+    leaving as the planning state's anchor says (``PlanningState.anchor``: its time and Dcum
+    there, and the goods on board from a depot whose load was recorded).
+
+    A recorded load L caps the trip's deliveries: delivered <= L, i.e. delivered + (B - L)
+    <= B, which is the peak's test with B - L in the place of the term max_i (p_i -
+    delivered_i) from before the first free visit; so the trip's peak starts at
+    delivered so far + B - L = B - on_board, if that is more than its walk gives."""
     peak = pickup = 0
     loaded = False
     visited = 0
@@ -377,8 +581,10 @@ def anchor_of(instance: Instance, n: int, prefix: Route, trailing_depot: int | N
             else:
                 pickup += v.amount
                 peak = max(peak, pickup)
-    return Anchor(last, 0.0 if arrival is None else arrival, 0.0 if flown is None else flown,
-                  visited, peak, pickup, loaded, trailing_depot is not None)
+    if leaves.on_board is not None:
+        peak = max(peak, instance.aavs[n].capacity - leaves.on_board)
+    return Anchor(last, leaves.time, leaves.flown, visited, peak, pickup, loaded,
+                  trailing_depot is not None)
 
 
 def schedule_route(instance: Instance, prefix: Route, tail: Sequence[Visit]) -> Route:

@@ -163,9 +163,6 @@ class BranchPriceAllocator(Settings):
 
     name = "exact-bp"
     proves_optimality = True
-    # Its dynamic states are not yet physical (tests/formulations/test_branch_price.py): until
-    # they are, solve and the runner give it static runs only.
-    modes = ("static",)
     setting_constraints = declare(
         time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
         incumbent=Options("dga", "greedy"),
@@ -174,13 +171,14 @@ class BranchPriceAllocator(Settings):
         closer_rows=Boolean(),
         cover_cuts=Boolean(),
         symmetry=Boolean(),
+        strong_candidates=Interval(int, 1, None),
         threads=Interval(int, 1, None),
     )
 
     def __init__(self, time_limit: float | None = None, incumbent: str = "dga",
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
                  closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
-                 threads: int = 1) -> None:
+                 strong_candidates: int = 4, threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
         self.threads = threads
@@ -189,6 +187,7 @@ class BranchPriceAllocator(Settings):
         self.heuristic_cap = heuristic_cap
         self.columns_per_aav = columns_per_aav
         self.closer_rows = closer_rows
+        self.strong_candidates = strong_candidates
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -199,7 +198,7 @@ class BranchPriceAllocator(Settings):
         began = time.perf_counter()
         limit = _limit(self.time_limit, time_limit)
         instance = state.instance
-        evaluator = CostEvaluator(instance)
+        evaluator = state.evaluator()
         # The search starts from the better of greedy and the chosen heuristic's plan.
         starts = [_greedy(state)]
         if self.incumbent != "greedy":
@@ -208,11 +207,13 @@ class BranchPriceAllocator(Settings):
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start),
                                  "warm_start_time": time.perf_counter() - began}
         try:
-            search = BranchPrice(instance, sorted(state.visible), state.committed,
+            search = BranchPrice(instance, sorted(state.visible), state.committed, state.time,
                                  heuristic_cap=self.heuristic_cap,
                                  columns_per_aav=self.columns_per_aav,
                                  closer_rows=self.closer_rows, cover_cuts=self.cover_cuts,
-                                 symmetry=self.symmetry, threads=self.threads)
+                                 symmetry=self.symmetry,
+                                 strong_candidates=self.strong_candidates,
+                                 threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

@@ -2,7 +2,7 @@ import subprocess
 import sys
 
 HEAVY = ("torch", "pyomo", "ortools", "highspy", "gymnasium", "cvxpy", "dask", "matplotlib",
-         "pyvrp", "pandas")
+         "pyvrp", "pandas", "numba")
 
 
 def test_importing_the_package_and_the_cli_loads_no_solver_backend():

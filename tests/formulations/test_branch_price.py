@@ -97,11 +97,10 @@ def _random_prices(search: BranchPrice, n: int, rng: random.Random) -> TaskPrice
     return prices
 
 
-@pytest.mark.parametrize("seed", range(8))
-def test_pricing_finds_the_least_reduced_cost_of_all_schedules(seed: int) -> None:
-    instance = tiny_instance(seed, n_aavs=2, n_tasks=3, max_demand=4)
-    search = BranchPrice(instance)
-    rng = random.Random(seed)
+def _pricing_matches_every_schedule(search: BranchPrice, rng: random.Random) -> int:
+    """The labelling's least reduced cost, at the first LP's duals and at random ones, is
+    the least over every schedule (each priced from the evaluator's walk of its route);
+    returns how many (AAV, prices) pairs had a schedule besides the empty one."""
     checked = 0
     for n, pricer in enumerate(search.pricers):
         for use_lp in (True, False):
@@ -112,17 +111,24 @@ def test_pricing_finds_the_least_reduced_cost_of_all_schedules(seed: int) -> Non
             else:
                 prices = _random_prices(search, n, rng)
                 conv = -prices.base
+                # The labelling starts from the prefix's own terms, as search.prices does.
+                prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
             least, found = pricer.price(prices, Restrictions())
             every = [search.reduced_cost(search.make_column(n, tail), prices) - conv
                      for tail in all_schedules(pricer)]
-            assert len(every) > 1
             assert least == pytest.approx(min(every), abs=1e-9)
             for schedule in found:  # the labelling's arithmetic is the evaluator's
                 column = search.make_column(n, schedule.tail)
                 assert schedule.reduced_cost == pytest.approx(
                     search.reduced_cost(column, prices) - conv, abs=1e-9)
-            checked += 1
-    assert checked == 4
+            checked += len(every) > 1
+    return checked
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_pricing_finds_the_least_reduced_cost_of_all_schedules(seed: int) -> None:
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=3, max_demand=4)
+    assert _pricing_matches_every_schedule(BranchPrice(instance), random.Random(seed)) == 4
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -152,15 +158,7 @@ def _dynamic_states(seed: int):
     return instance, PlanningState(instance, 10.0, visible, committed)
 
 
-#: exact-bp's dynamic states predate the physical dynamic run (issue 15): its schedules leave
-#: the anchor at its last arrival, not at the re-plan time, and ignore recorded loads, so on
-#: these states it finds a J below the physical optimum; it is static-only until they do.
-NOT_YET_PHYSICAL = pytest.mark.xfail(strict=True, reason="exact-bp does not yet model "
-                                     "planned_at departures and recorded loads")
-
-
-@pytest.mark.parametrize("seed", [pytest.param(s, marks=NOT_YET_PHYSICAL) if s in (0, 1, 3, 7)
-                                  else s for s in range(8)])
+@pytest.mark.parametrize("seed", range(8))
 def test_dynamic_states_equal_the_milp(seed: int) -> None:
     pytest.importorskip("pyomo")
     instance, state = _dynamic_states(seed)
@@ -185,7 +183,8 @@ def test_dynamic_state_with_a_committed_join_as_the_milp() -> None:
     result = solve_bp(instance, state)
     assert result.stats["status"] == "optimal"
     assert result.routes == ((Visit(0, 10), Visit(1)), (Visit(0, 10), Visit(1)))
-    assert result.stats["J"] == pytest.approx(10 * 50 / 3600 + 2 * 10 / 800, rel=1e-12)
+    # A1 leaves its start at the plan time, 1 s, and is the later of the two at T0 (51 s).
+    assert result.stats["J"] == pytest.approx(10 * 51 / 3600 + 2 * 10 / 800, rel=1e-12)
 
 
 def test_same_seed_same_result() -> None:
@@ -211,3 +210,73 @@ def test_registered_and_time_limited() -> None:
     assert CostEvaluator(instance).cost(result.routes) == pytest.approx(stats["J"], rel=1e-12)
     for key in ("nodes", "columns", "lp_time", "pricing_time", "root_bound", "mip_gap"):
         assert key in stats
+
+
+def test_a_recorded_load_and_the_plan_time_bind_the_schedule() -> None:
+    # tests/test_simulator.py's hand case: A0 left D0 at 0 with T0's 5 kg (recorded) and is
+    # flying to T0 at the re-plan (50 s), when T1 is released. T1's goods were never loaded:
+    # A0 must fetch them (T0 at 100, D0 at 200, T1 at 400) instead of flying on (T1 at 200).
+    from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind, Visit
+
+    heavy = {"speed": 10.0, "capacity": 30, "max_range": 60_000.0, "alpha": 20.0,
+             "lam": 2000.0}
+    tasks = (Task("T0", 1000, 0, TaskKind.DELIVERY, 5, 0, 3600, 0),
+             Task("T1", 2000, 0, TaskKind.DELIVERY, 5, 50, 3600, 50))
+    instance = Instance("deliveries", (AAV("A0", 1, 0, 0, **heavy),), (Depot("D0", 0, 0),),
+                        tasks)
+    state = PlanningState(instance, 50.0, frozenset({0, 1}), ((Visit(2, load=5), Visit(0, 5)),))
+    result = solve_bp(instance, state)
+    assert result.stats["status"] == "optimal"
+    assert result.routes == ((Visit(2, load=5), Visit(0, 5), Visit(2), Visit(1, 5), Visit(2)),)
+    op = 20 * 1.0 / 3200  # a 1 km leg; E_base = 20 * 60 + 2000
+    assert result.stats["J"] == pytest.approx(10 * 100 / 3600 + op + 10 * 350 / 3600 + 2 * op,
+                                              rel=1e-12)
+
+
+class _Recording:
+    """Keeps every planning state of a dynamic run (the simulator's stamps and loads)."""
+
+    name = "recording"
+
+    def __init__(self) -> None:
+        self.states: list[PlanningState] = []
+
+    def plan(self, state, *, seed=0, time_limit=None):
+        self.states.append(state)
+        return make_allocator("greedy").plan(state, seed=seed)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_simulators_states_equal_the_milp(seed: int) -> None:
+    pytest.importorskip("pyomo")
+    from tsac_bench.planning.simulator import simulate
+
+    instance = tiny_instance(300 + seed, n_aavs=2, n_tasks=4, max_demand=4, releases=True)
+    recorder = _Recording()
+    simulate(instance, recorder)
+    states = [s for s in recorder.states if any(s.committed)]
+    assert states, "no re-plan with committed visits"
+    for state in states:
+        milp = ExactAllocator().plan(state)
+        bp = solve_bp(instance, state)
+        assert milp.stats["status"] == "optimal"
+        assert bp.stats["status"] == "optimal"
+        assert state.violations(bp.routes) == []
+        assert close(bp.stats["J"], milp.stats["J"]), (state.time, bp.stats["J"],
+                                                       milp.stats["J"])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_pricing_in_the_simulators_states_finds_the_least_reduced_cost(seed: int) -> None:
+    # Plan-time departures, committed depots the AAV waits at, recorded loads.
+    from tsac_bench.planning.simulator import simulate
+
+    instance = tiny_instance(300 + seed, n_aavs=2, n_tasks=4, max_demand=4, releases=True)
+    recorder = _Recording()
+    simulate(instance, recorder)
+    rng = random.Random(seed)
+    checked = 0
+    for state in recorder.states:
+        search = BranchPrice(instance, sorted(state.visible), state.committed, state.time)
+        checked += _pricing_matches_every_schedule(search, rng)
+    assert checked >= 4

@@ -8,6 +8,7 @@ Writes reports/evaluator-speed.md.
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import statistics
 import timeit
@@ -48,12 +49,15 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("reports/evaluator-speed.md"))
     args = parser.parse_args()
     rows = [measure(seed) for seed in range(args.instances)]
+    # Other processes on the machine slow the timings; the report says how busy it was.
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     lines = [
         "# Evaluator speed (32/80, greedy plans)",
         "",
         f"Command: `python benchmarks/evaluator_speed.py --instances {args.instances}`  ",
         f"Machine: {platform.processor() or platform.machine()}, Python "
-        f"{platform.python_version()}; median of 7 repeats per instance.",
+        f"{platform.python_version()}, {os.cpu_count()} cores, load average {load:.1f} "
+        "(1 min) at the end of the run; median of 7 repeats per instance.",
         "",
         "| instance seed | visits | route changed (visits) | full evaluate (us) | "
         "cost only (us) | incremental propose (us) |",

@@ -27,7 +27,8 @@ the labelling's objective. With every AAV's least reduced cost rc_k (exact prici
 Lagrangian bound LP + sum_k min(0, rc_k) is valid at every iteration.
 
 Branching, in this order, on a fractional
-1. visit x_km = sum of lambda over k's columns that visit m (free part),
+1. visit x_km = sum of lambda over k's columns that visit m (free part; of the most
+   fractional few, the one whose children's LPs over the present columns rise most),
 2. arc x_k(i, j, mode) (the free arcs of k's columns),
 3. amount sum_c a_cm lambda_c of k at m (a_km <= v or >= v + 1).
 The "0" and "amount" sides are enforced in pricing (and on the existing columns), the "1"

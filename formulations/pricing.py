@@ -416,6 +416,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
     bucket = np.empty((n_nodes, 64), np.int64)
     bucket_clock = np.empty((n_nodes, 64))
     bucket_cost = np.empty((n_nodes, 64))
+    bucket_tasks = np.empty((n_nodes, 64), np.int64)  # the first word of the visited set
     bucket_len = np.zeros(n_nodes, np.int64)
     frontier = np.zeros(1, np.int64)
     scratch_i = np.empty(size, np.int64)
@@ -489,13 +490,15 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                 alive[k], loaded[k] = True, has_goods
                 visited[k] = visited[lab]
                 visited[k, j >> 6] |= np.int64(1) << (j & 63)
-                # Dominance within the bucket of node j; its labels' clocks and costs are
-                # kept side by side so that the scan reads contiguous memory and tests the
-                # tables only where those two allow dominance.
+                # Dominance within the bucket of node j; its labels' clocks, costs and
+                # (first words of) visited sets are kept side by side so that the scan
+                # reads contiguous memory and tests the rest only where those allow it.
                 members = bucket_len[j]
                 rejected = False
+                tasks = visited[k, 0]
                 for i in range(members):
-                    if bucket_clock[j, i] <= t and bucket_cost[j, i] <= cost[k]:
+                    if bucket_clock[j, i] <= t and bucket_cost[j, i] <= cost[k] and \
+                            bucket_tasks[j, i] & ~tasks == 0:
                         other = bucket[j, i]
                         if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
                                                        flown, tables, max_range,
@@ -510,6 +513,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                     if not alive[other]:
                         continue
                     if bucket_clock[j, i] >= t and bucket_cost[j, i] >= cost[k] and \
+                            tasks & ~bucket_tasks[j, i] == 0 and \
                             _dominates(k, other, clock, cost, loaded, visited, flown, tables,
                                        max_range, dcum_monotone):
                         alive[other] = False
@@ -517,14 +521,17 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                     bucket[j, kept] = other
                     bucket_clock[j, kept] = bucket_clock[j, i]
                     bucket_cost[j, kept] = bucket_cost[j, i]
+                    bucket_tasks[j, kept] = bucket_tasks[j, i]
                     kept += 1
                 if kept == bucket.shape[1]:
                     bucket = _wider(bucket, 2 * kept)
                     bucket_clock = _wider(bucket_clock, 2 * kept)
                     bucket_cost = _wider(bucket_cost, 2 * kept)
+                    bucket_tasks = _wider(bucket_tasks, 2 * kept)
                 bucket[j, kept] = k
                 bucket_clock[j, kept] = t
                 bucket_cost[j, kept] = cost[k]
+                bucket_tasks[j, kept] = tasks
                 bucket_len[j] = kept + 1
                 count += 1
                 if n_produced == produced.shape[0]:

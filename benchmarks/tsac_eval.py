@@ -32,7 +32,8 @@ from tsac_bench.planning import make_allocator
 from tsac_bench.planning.solve import solve
 
 SCALES = ("16/40", "32/80")
-OWN_PLAN = "own plan, 1"
+#: DGA's start at a re-plan: half its population from the plan in force (solvers/dga.py).
+DGA_START = "half from the plan in force, 1"
 PAPER_MC = Path(__file__).resolve().parent.parent / "instances" / "paper-mc"
 
 
@@ -58,7 +59,7 @@ def footing(method: str, settings: dict) -> str:
     settings; other methods plan from scratch each call)."""
     resolved = make_allocator(method, **settings).settings()
     if "init" not in resolved:
-        return OWN_PLAN
+        return DGA_START
     return f"{resolved['init']}, {resolved['samples']}"
 
 
@@ -135,7 +136,7 @@ def main() -> None:
                 outcome = solve(instance, method, seed=0, mode="dynamic", settings=settings)
                 walls.setdefault(label, []).append(time.perf_counter() - began)
                 costs.setdefault(label, []).append(outcome.cost)
-                if starts[label] != OWN_PLAN:
+                if starts[label] != DGA_START:
                     unstable += sum(r["stats"]["stop"] != "stable"
                                     for r in outcome.stats["replans"])
             print(f"{scale} {label}: mean J {statistics.fmean(costs[label]):.2f}", flush=True)

@@ -19,13 +19,13 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import re
 import shlex
 import statistics
 import time
 from pathlib import Path
 
-from tsac_bench.model import Instance
+from paper_reproduction import instance_files
+
 from tsac_bench.model.generator import generate
 from tsac_bench.model.io import read_instance
 from tsac_bench.planning import make_allocator
@@ -34,7 +34,6 @@ from tsac_bench.planning.solve import solve
 SCALES = ("16/40", "32/80")
 #: DGA's start at a re-plan: half its population from the plan in force (solvers/dga.py).
 DGA_START = "half from the plan in force, 1"
-PAPER_MC = Path(__file__).resolve().parent.parent / "instances" / "paper-mc"
 
 
 def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
@@ -61,14 +60,6 @@ def footing(method: str, settings: dict) -> str:
     if "init" not in resolved:
         return DGA_START
     return f"{resolved['init']}, {resolved['samples']}"
-
-
-def paper_mc(scale: str, count: int) -> list[Instance]:
-    """The first ``count`` instances by generator seed of ``instances/paper-mc/`` at ``scale``
-    (the reproduction's instances, generated with seeds 0..99)."""
-    folder = PAPER_MC / scale.replace("/", "-")
-    files = sorted(folder.glob("*.json"), key=lambda p: int(re.search(r"-s(\d+)$", p.stem)[1]))
-    return [read_instance(path) for path in files[:count]]
 
 
 def main() -> None:
@@ -123,8 +114,8 @@ def main() -> None:
     ]
     unstable = 0
     for scale in args.scales:
-        instances = (paper_mc(scale, args.instances) if args.paper_mc
-                     else [generate(scale, seed) for seed in seeds])
+        instances = ([read_instance(path) for path in instance_files(scale, args.instances)]
+                     if args.paper_mc else [generate(scale, seed) for seed in seeds])
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
         rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,

@@ -96,11 +96,11 @@ class Column:
 
 @dataclass(frozen=True)
 class Decision:
-    kind: str  # "visit" | "arc" | "amount"
+    kind: str  # "visit" | "arc" | "time" | "amount"
     aav: int
     key: Any  # task, or (tail, head, mode)
-    side: str  # "0" | "1" for visit/arc; "le" | "ge" for amount
-    value: int = 0
+    side: str  # "0" | "1" for visit/arc; "le" | "gt" for time; "le" | "ge" for amount
+    value: float = 0  # the amount's or the arrival term's threshold
 
 
 @dataclass
@@ -120,7 +120,7 @@ class BranchPrice:
                  heuristic_cap: int = 3,
                  columns_per_aav: int = 30, closer_rows: bool = True,
                  cover_cuts: bool = True, symmetry: bool = True, threads: int = 1,
-                 strong_candidates: int = 4) -> None:
+                 strong_candidates: int = 4, time_branching: bool = True) -> None:
         import highspy
 
         self.instance = instance
@@ -142,6 +142,7 @@ class BranchPrice:
         self.columns_per_aav = columns_per_aav
         self.closer_rows = closer_rows
         self.strong_candidates = strong_candidates
+        self.time_branching = time_branching
         w1, w2, w3 = instance.weights
         self.constant = (instance.unserved_task_cost * (instance.n_tasks - len(self.tasks))
                          + w1 * len(self.tasks) + w2 * len(self.late_tasks))
@@ -368,6 +369,10 @@ class BranchPrice:
             elif d.kind == "amount" and d.side == "ge":
                 r.amount_low[d.key] = max(r.amount_low.get(d.key, 1), d.value)
                 active.add(("visit", d.aav, d.key))
+            elif d.kind == "time" and d.side == "le":
+                r.arrival_high[d.key] = min(r.arrival_high.get(d.key, math.inf), d.value)
+            elif d.kind == "time":
+                r.arrival_low[d.key] = max(r.arrival_low.get(d.key, -math.inf), d.value)
             else:
                 active.add((d.kind, d.aav, d.key))
         for n, r in enumerate(restrictions):
@@ -387,7 +392,7 @@ class BranchPrice:
                 closed.update(c.index for c in self.visiting.get((n, m), ()))
             for arc in r.forbidden_arcs:
                 closed.update(c.index for c in self.using_arc.get((n, arc), ()))
-            for m in {*r.amount_low, *r.amount_high}:
+            for m in {*r.amount_low, *r.amount_high, *r.arrival_low, *r.arrival_high}:
                 closed.update(c.index for c in self.visiting.get((n, m), ())
                               if not _compatible(c, r))
         for index in closed - self.closed:
@@ -517,10 +522,12 @@ class BranchPrice:
         return tuple(best[n][1].route for n in range(self.instance.n_aavs))
 
     def branching_candidates(self, x: np.ndarray) -> Decision | tuple[Route, ...]:
-        """The most fractional visit, then arc, then amount; or the integral plan."""
+        """The most fractional visit, then the widest spread arrival, then the most
+        fractional arc, then amount; or the integral plan."""
         visit: dict[tuple[int, int], float] = {}
         arc: dict[tuple[int, Arc3], float] = {}
         amount: dict[tuple[int, int], float] = {}
+        arrivals: dict[tuple[int, int], list[tuple[float, float]]] = {}
         for col in self.columns:
             v = x[col.index]
             if v <= 1e-12:
@@ -528,18 +535,28 @@ class BranchPrice:
             for m, a in col.free_amounts.items():
                 visit[col.aav, m] = visit.get((col.aav, m), 0.0) + v
                 amount[col.aav, m] = amount.get((col.aav, m), 0.0) + v * a
+                if m in col.theta:
+                    arrivals.setdefault((col.aav, m), []).append((v, col.theta[m]))
             for e in col.arcs:
                 arc[col.aav, e] = arc.get((col.aav, e), 0.0) + v
-        for kind, values in (("visit", visit), ("arc", arc)):
-            frac = [(abs(v - 0.5), key) for key, v in sorted(values.items())
-                    if INTEGRALITY < v < 1 - INTEGRALITY]
-            if frac:
-                if kind == "visit" and self.strong_candidates > 1 and len(frac) > 1:
-                    k, key = self.strongest([key for _, key in sorted(frac)
-                                             [:self.strong_candidates]])
-                else:
-                    (k, key) = min(frac)[1]
-                return Decision(kind, k, key, "0")
+        frac = [(abs(v - 0.5), key) for key, v in sorted(visit.items())
+                if INTEGRALITY < v < 1 - INTEGRALITY]
+        if frac:
+            if self.strong_candidates > 1 and len(frac) > 1:
+                k, m = self.strongest([key for _, key in sorted(frac)[:self.strong_candidates]])
+            else:
+                (k, m) = min(frac)[1]
+            return Decision("visit", k, m, "0")
+        if self.time_branching:
+            split = self.widest_arrival(arrivals)
+            if split is not None:
+                (k, m), threshold = split
+                return Decision("time", k, m, "le", threshold)
+        frac = [(abs(v - 0.5), key) for key, v in sorted(arc.items())
+                if INTEGRALITY < v < 1 - INTEGRALITY]
+        if frac:
+            (k, e) = min(frac)[1]
+            return Decision("arc", k, e, "0")
         frac = [(abs(v - math.floor(v) - 0.5), key) for key, v in sorted(amount.items())
                 if abs(v - round(v)) > INTEGRALITY]
         if frac:
@@ -552,6 +569,24 @@ class BranchPrice:
             routes.append(tuple(Visit(v.node, round(amount[n, v.node]))
                                 if v.node in cols[0].free_amounts else v for v in route))
         return tuple(routes)
+
+    @staticmethod
+    def widest_arrival(arrivals: dict[tuple[int, int], list[tuple[float, float]]]
+                       ) -> tuple[tuple[int, int], float] | None:
+        """With every visit integral, an AAV's columns still mix visit orders, and the time
+        rows see the lambda-average of their arrivals where the plan pays the latest
+        member's (the leak of the root bound, docs/formulations.md). Of the (AAV, task)
+        pairs whose arrival term is spread over columns, the one of largest mean absolute
+        deviation, split at its mean (both sides then carry weight)."""
+        best, best_spread = None, 0.0
+        for key, points in sorted(arrivals.items()):
+            weight = math.fsum(v for v, _ in points)
+            mean = math.fsum(v * t for v, t in points) / weight
+            spread = math.fsum(v * abs(t - mean) for v, t in points) / weight
+            below = math.fsum(v for v, t in points if t <= mean)
+            if spread > best_spread and INTEGRALITY < below < weight - INTEGRALITY:
+                best, best_spread = (key, mean), spread
+        return best
 
     def strongest(self, candidates: list[tuple[int, int]]) -> tuple[int, int]:
         """Of the (AAV, task) visit candidates, the one whose two children's LPs over the
@@ -621,6 +656,7 @@ class BranchPrice:
         queue: list[tuple[float, int, tuple[Decision, ...], Any]] = [
             (-math.inf, next(counter), (), None)]
         nodes = 0
+        branches = dict.fromkeys(("visit", "time", "arc", "amount"), 0)
         root_bound = None
         global_bound = -math.inf
         status = "optimal"
@@ -660,9 +696,13 @@ class BranchPrice:
             choice = self.branching_candidates(x)
             clock["branching"] += time.perf_counter() - choosing
             if isinstance(choice, Decision):
+                branches[choice.kind] += 1
                 if choice.kind == "amount":
                     sides = [choice, Decision("amount", choice.aav, choice.key, "ge",
                                               choice.value + 1)]
+                elif choice.kind == "time":
+                    sides = [choice, Decision("time", choice.aav, choice.key, "gt",
+                                              choice.value)]
                 else:
                     sides = [choice, Decision(choice.kind, choice.aav, choice.key, "1")]
                 basis = self.basis()
@@ -690,6 +730,7 @@ class BranchPrice:
             "root_bound": _finite(root_bound),
             "nodes": nodes,
             "open_nodes": len(queue),
+            **{f"{kind}_branches": count for kind, count in branches.items()},
             "columns": len(self.columns),
             "lp_time": clock["lp"],
             "pricing_time": clock["pricing"],
@@ -727,6 +768,13 @@ def _compatible(col: Column, r: Restrictions) -> bool:
         return False
     for m, hi in r.amount_high.items():
         if col.free_amounts.get(m, 0) > hi:
+            return False
+    # A free visit without an arrival term is late (past every threshold).
+    for m, hi in r.arrival_high.items():
+        if m in col.free_amounts and col.theta.get(m, math.inf) > hi:
+            return False
+    for m, lo in r.arrival_low.items():
+        if m in col.free_amounts and col.theta.get(m, math.inf) <= lo:
             return False
     return all(col.free_amounts.get(m, lo) >= lo for m, lo in r.amount_low.items())
 

@@ -20,7 +20,10 @@ node when every completion of L2 is a completion of L1 at no higher reduced cost
   >= 0), visited1 subset of visited2 (elementarity), loaded1 >= loaded2, and
   Dcum: both beyond the range (every later visit pays the full-range cost), or Dcum1 <= Dcum2
   when the full-range cost is at least the cost of any leg (q is then non-decreasing in Dcum),
-  or Dcum1 == Dcum2 otherwise.
+  or Dcum1 == Dcum2 otherwise;
+  and, where a branching decision asks a task's arrival to be later than a floor
+  (``Restrictions.arrival_low``): clock1 == clock2, or L2 has visited that task, or every
+  arrival from clock1 is past the floor (an earlier clock could otherwise reach it too early).
 Arrival and Dcum are accumulated leg by leg in the evaluator's order of float operations, so
 a schedule's arrivals (hence its time-window feasibility and price) are the evaluator's to
 the last bit. The labelling runs compiled (numba): pricing is nearly all of the search's
@@ -65,6 +68,10 @@ class Restrictions:
     forbidden_arcs: frozenset[tuple[int, int, int]] = frozenset()
     amount_low: dict[int, int] = field(default_factory=dict)
     amount_high: dict[int, int] = field(default_factory=dict)
+    #: Arrival-window branching on a timed task m: a visit to m must have its arrival term
+    #: theta = (t - t_start) / horizon <= arrival_high[m], or > arrival_low[m].
+    arrival_high: dict[int, float] = field(default_factory=dict)
+    arrival_low: dict[int, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -207,6 +214,12 @@ class Pricer:
             low[m] = v
         for m, v in restrictions.amount_high.items():
             high[m] = v
+        theta_high = np.full(n_tasks, np.inf)
+        theta_low = np.full(n_tasks, -np.inf)
+        for m, v in restrictions.arrival_high.items():
+            theta_high[m] = v
+        for m, v in restrictions.arrival_low.items():
+            theta_low[m] = v
         root = np.full((size, size), np.inf)
         root[self.anchor.peak:, self.anchor.pickup:] = prices.base
         anchor = self.anchor
@@ -220,6 +233,7 @@ class Pricer:
             per_task(prices.cover), per_task(prices.aav_time), per_task(prices.closer),
             per_task(prices.closer_time), per_task(prices.visit_bonus),
             per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
+            theta_low, theta_high, np.array(sorted(restrictions.arrival_low), np.int64),
             0 if label_cap is None else label_cap)
         cost, alive = labels[0], labels[1]
         least = float(cost.min())
@@ -352,7 +366,8 @@ def _first_visit_table(dst, least, delivery, price, low, high):
 
 
 @njit(cache=True)
-def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone):
+def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone,
+               floored, theta_low, t_start, horizon):
     """The rule of the module docstring; the cheap scalar tests go first (the table test
     needs cost_a <= cost_b, its cell (B, B))."""
     if clock[a] > clock[b] or cost[a] > cost[b] or (loaded[b] and not loaded[a]):
@@ -360,6 +375,14 @@ def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcu
     for w in range(visited.shape[1]):
         if visited[a, w] & ~visited[b, w]:
             return False
+    # A task that must be reached late (theta > theta_low): b's completion may reach it late
+    # enough where a's earlier clock does not, unless b cannot visit it any more, both
+    # arrive alike, or any arrival from a's clock is already late enough.
+    if clock[a] < clock[b]:
+        for m in floored:
+            if not (visited[b, m >> 6] >> (m & 63)) & 1 and \
+                    (clock[a] - t_start[m]) / horizon <= theta_low[m]:
+                return False
     if not (flown[a] > max_range and flown[b] > max_range):
         if dcum_monotone:
             if flown[a] > flown[b]:
@@ -382,7 +405,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                speed, capacity, max_range, per_metre, full, dcum_monotone, horizon,
                anchor_node, anchor_clock, anchor_flown, anchor_visited, anchor_loaded, root,
                cover, aav_time, closer, closer_time, visit_bonus, cut_bonus, arc_bonus,
-               forbidden_task, forbidden_arc, amount_low, amount_high, label_cap):
+               forbidden_task, forbidden_arc, amount_low, amount_high, theta_low,
+               theta_high, floored, label_cap):
     """Every undominated label from the anchor, extended path length by path length (with
     ``label_cap`` > 0 only the cheapest that many per node and length go on).
 
@@ -455,6 +479,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                 c -= cut_bonus[j]
                 if timed[j]:
                     theta = (t - t_start[j]) / horizon
+                    if theta > theta_high[j] or theta <= theta_low[j]:
+                        continue
                     c += aav_time[j] * theta
                     c += min(0.0, closer_time[j] * theta - closer[j])
                 a_low = amount_low[j]
@@ -502,7 +528,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                         other = bucket[j, i]
                         if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
                                                        flown, tables, max_range,
-                                                       dcum_monotone):
+                                                       dcum_monotone, floored, theta_low,
+                                                       t_start, horizon):
                             rejected = True
                             break
                 if rejected:
@@ -515,7 +542,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                     if bucket_clock[j, i] >= t and bucket_cost[j, i] >= cost[k] and \
                             tasks & ~bucket_tasks[j, i] == 0 and \
                             _dominates(k, other, clock, cost, loaded, visited, flown, tables,
-                                       max_range, dcum_monotone):
+                                       max_range, dcum_monotone, floored, theta_low,
+                                       t_start, horizon):
                         alive[other] = False
                         continue
                     bucket[j, kept] = other

@@ -172,13 +172,15 @@ class BranchPriceAllocator(Settings):
         cover_cuts=Boolean(),
         symmetry=Boolean(),
         strong_candidates=Interval(int, 1, None),
+        time_branching=Boolean(),
         threads=Interval(int, 1, None),
     )
 
     def __init__(self, time_limit: float | None = None, incumbent: str = "dga",
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
                  closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
-                 strong_candidates: int = 4, threads: int = 1) -> None:
+                 strong_candidates: int = 4, time_branching: bool = True,
+                 threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
         self.threads = threads
@@ -188,6 +190,7 @@ class BranchPriceAllocator(Settings):
         self.columns_per_aav = columns_per_aav
         self.closer_rows = closer_rows
         self.strong_candidates = strong_candidates
+        self.time_branching = time_branching
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -213,7 +216,7 @@ class BranchPriceAllocator(Settings):
                                  closer_rows=self.closer_rows, cover_cuts=self.cover_cuts,
                                  symmetry=self.symmetry,
                                  strong_candidates=self.strong_candidates,
-                                 threads=self.threads)
+                                 time_branching=self.time_branching, threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

@@ -12,7 +12,7 @@ from brute_force import brute_force
 from plans import random_plan
 from tiny import tiny_instance
 
-from tsac_bench.formulations.branch_price import BranchPrice
+from tsac_bench.formulations.branch_price import BranchPrice, _compatible
 from tsac_bench.formulations.pricing import Restrictions, TaskPrices, all_schedules
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.io import read_instance
@@ -123,6 +123,63 @@ def _pricing_matches_every_schedule(search: BranchPrice, rng: random.Random) -> 
                     search.reduced_cost(column, prices) - conv, abs=1e-9)
             checked += len(every) > 1
     return checked
+
+
+def _arrival_windows(search: BranchPrice, n: int, rng: random.Random) -> Restrictions:
+    """Arrival-window decisions on random tasks, each threshold one schedule's arrival
+    term there (so both sides hold schedules)."""
+    terms: dict[int, set[float]] = {}
+    for tail in all_schedules(search.pricers[n]):
+        for m, t in search.make_column(n, tail).theta.items():
+            terms.setdefault(m, set()).add(t)
+    restrictions = Restrictions()
+    for m in sorted(terms):
+        threshold = rng.choice(sorted(terms[m]))
+        side = rng.choice(["high", "low", "none"])
+        if side == "high":
+            restrictions.arrival_high[m] = threshold
+        elif side == "low":
+            restrictions.arrival_low[m] = threshold
+    return restrictions
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_pricing_under_arrival_windows_finds_the_least_of_the_allowed_schedules(
+        seed: int) -> None:
+    # The "later than" side weakens the clock rule of dominance: an earlier label may reach
+    # the task too early where a later one does not.
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
+    search = BranchPrice(instance)
+    rng = random.Random(seed)
+    restricted = 0
+    for n, pricer in enumerate(search.pricers):
+        for _ in range(3):
+            prices = _random_prices(search, n, rng)
+            conv = -prices.base
+            prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
+            windows = _arrival_windows(search, n, rng)
+            least, found = pricer.price(prices, windows)
+            allowed = [search.make_column(n, tail) for tail in all_schedules(pricer)]
+            allowed = [c for c in allowed if _compatible(c, windows)]
+            assert least == pytest.approx(
+                min(search.reduced_cost(c, prices) - conv for c in allowed), abs=1e-9)
+            assert all(_compatible(search.make_column(n, f.tail), windows) for f in found)
+            restricted += bool(windows.arrival_low or windows.arrival_high)
+    assert restricted >= 3
+
+
+@pytest.mark.parametrize("seed", [4, 7])
+def test_arrival_window_branching_keeps_the_brute_force_optimum(seed: int) -> None:
+    # Instances of test_exact_bp_equals_brute_force whose trees branch on arrival windows.
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=3, max_demand=4 + seed % 3)
+    J_brute, _ = brute_force(instance)
+    result = solve_bp(instance)
+    assert result.stats["time_branches"] >= 1
+    assert result.stats["status"] == "optimal"
+    assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
+    without = solve_bp(instance, time_branching=False)
+    assert without.stats["time_branches"] == 0
+    assert close(without.stats["J"], J_brute)
 
 
 @pytest.mark.parametrize("seed", range(8))

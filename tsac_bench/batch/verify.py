@@ -1,8 +1,9 @@
 """Proven optima of instance directories: ``manifest.json`` (``tsac-bench/manifest@1``).
 
-``prove`` solves every instance of a directory with both exact backends and records J* where
-both prove optimality and agree; ``verify`` re-solves and compares with the manifest (what
-``tsac-bench verify DIR`` runs).
+``prove`` solves every instance of a directory with the exact backends and records J* where
+at least one proves optimality and every backend agrees with it (the provers on J*, the
+others with a J no lower and a bound no higher); ``verify`` re-solves and compares with the
+manifest (what ``tsac-bench verify DIR`` runs).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ RECORDED = ("status", "J", "lower_bound", "mip_gap", "solver", "solver_version",
 
 def solve_exact(path: Path, method: str, time_limit: float | None, threads: int = 1,
                 seed: int = 0) -> dict[str, Any]:
-    """One exact backend on one instance file; the stats of its PlanResult plus J."""
+    """One exact backend on one instance file; the stats of its PlanResult plus J and the
+    time limit it ran under."""
     from tsac_bench.model.io import read_instance
     from tsac_bench.planning.solve import solve
 
@@ -38,45 +40,60 @@ def solve_exact(path: Path, method: str, time_limit: float | None, threads: int 
                     settings={"threads": threads})
     stats = {k: outcome.stats.get(k) for k in RECORDED}
     stats["J"] = outcome.cost
+    stats["time_limit"] = time_limit
     return stats
 
 
 def entry_from(results: dict[str, dict[str, Any]], file: str, command: str) -> dict[str, Any]:
-    """The manifest entry of one instance from each backend's stats."""
-    optimal = [r for r in results.values() if r["status"] == "optimal"]
-    proven = len(optimal) == len(results) and all(costs_agree(r["J"], optimal[0]["J"])
-                                                  for r in optimal)
+    """The manifest entry of one instance from each backend's stats. J* needs one backend
+    that proves it and no disagreement: the other provers reach the same J, and every
+    backend's J is no lower and its bound no higher (status "conflict" otherwise: a defect
+    of a backend, to be looked into)."""
+    optimal = {m: r for m, r in results.items() if r["status"] == "optimal"}
     best = min(r["J"] for r in results.values())
+    J_star = min((r["J"] for r in optimal.values()), default=None)
+    agreed = J_star is not None and all(costs_agree(r["J"], J_star) for r in optimal.values()) \
+        and all(cost_at_least(r["J"], J_star) and (r["lower_bound"] is None
+                                                   or cost_at_least(J_star, r["lower_bound"]))
+                for r in results.values())
     bounds = [r["lower_bound"] for r in results.values() if r["lower_bound"] is not None]
     # HiGHS's bound is exact; CP-SAT's is for its scaled model less the scaling slack.
     bound = min(best, max(bounds)) if bounds else -math.inf
+    status = "optimal" if agreed else ("conflict" if optimal else "feasible")
     return {
         "file": file,
-        "J_star": min(r["J"] for r in optimal) if proven else None,
-        "lower_bound": min(best, bound) if not proven else min(r["J"] for r in optimal),
-        "status": "optimal" if proven else "feasible",
-        "mip_gap": 0.0 if proven else max(0.0, best - bound) / max(abs(best), 1e-10),
+        "J_star": J_star if agreed else None,
+        "lower_bound": J_star if agreed else min(best, bound),
+        "status": status,
+        "mip_gap": 0.0 if agreed else max(0.0, best - bound) / max(abs(best), 1e-10),
         "best_J": best,
+        "proved_by": sorted(optimal) if agreed else [],
         "solvers": results,
         "command": command,
     }
 
 
 def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
-          names: Iterable[str] | None = None, log: Any = print) -> Manifest:
-    """Solve every instance of ``directory`` with every exact method and write the manifest
-    (entries of instances not solved this time are kept)."""
+          names: Iterable[str] | None = None, log: Any = print,
+          methods: Sequence[str] | None = None) -> Manifest:
+    """Solve every instance of ``directory`` with ``methods`` (default: every exact method)
+    and write the manifest. A backend re-run replaces its record; the records of the other
+    backends in an existing entry are kept and judged with it (so a slow backend can be run
+    under its own time limit); entries of instances not solved this time are kept."""
     from tsac_bench.model.io import read_instance
 
     manifest = read_manifest(directory)
     if manifest.path.exists():
         manifest.require_valid()
     wanted = set(names) if names is not None else None
+    methods = exact_methods() if methods is None else list(methods)
     for file in iter_instance_files([directory]):
         name = read_instance(file).name
         if wanted is not None and name not in wanted:
             continue
-        results = {m: solve_exact(file, m, time_limit, threads) for m in exact_methods()}
+        results = dict(manifest.entries.get(name, {}).get("solvers", {}))
+        for m in methods:
+            results[m] = solve_exact(file, m, time_limit, threads) | {"command": command}
         entry = entry_from(results, file.name, command)
         manifest.entries[name] = entry
         log(f"{name}: {entry['status']} J*={entry['J_star']} LB={entry['lower_bound']:.6f} "
@@ -103,16 +120,21 @@ def verify(directory: Path, methods: Sequence[str] | None = None,
            threads: int = 1) -> list[Check]:
     """Re-solve the manifest's instances: an optimal J* must be matched (and proved again,
     unless the time limit stops the solver, in which case J* must lie in [LB, J]); an open
-    entry's best known bound must not exceed the new J. ``methods``: every installed method
-    that proves optimality when None."""
+    entry's best known bound must not exceed the new J. ``methods``: when None, the backends
+    that proved the entry's J* (re-proving it), or every installed exact method for an
+    entry without J*."""
     manifest = read_manifest(directory).require_valid()
-    methods = exact_methods() if methods is None else methods
+    installed = exact_methods()
     wanted = set(names) if names is not None else None
     checks = []
     for name, entry in manifest.entries.items():
         if wanted is not None and name not in wanted:
             continue
-        for method in methods:
+        provers = [m for m, r in entry.get("solvers", {}).items()
+                   if r.get("status") == "optimal" and m in installed]
+        chosen = methods if methods is not None else (
+            provers if entry["J_star"] is not None and provers else installed)
+        for method in chosen:
             r = solve_exact(directory / entry["file"], method, time_limit, threads)
             J, bound, status = r["J"], r["lower_bound"], r["status"]
             J_star = entry["J_star"]

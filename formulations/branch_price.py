@@ -470,20 +470,22 @@ class BranchPrice:
                 for n, pricer in enumerate(self.pricers):
                     _, found = pricer.price(prices[n], restrictions[n],
                                             limit=self.columns_per_aav,
-                                            label_cap=self.heuristic_cap)
+                                            label_cap=self.heuristic_cap, deadline=deadline)
                     added += self._add_found(n, found, restrictions, prices[n])
             exact = added == 0
             if exact:
                 least_total = 0.0
                 for n, pricer in enumerate(self.pricers):
                     least, found = pricer.price(prices[n], restrictions[n],
-                                                limit=self.columns_per_aav)
-                    least_total += min(0.0, least)
+                                                limit=self.columns_per_aav, deadline=deadline)
+                    least_total += min(0.0, least)  # -inf where cut short at the deadline
                     added += self._add_found(n, found, restrictions, prices[n])
                 bound = max(bound, value + least_total)
             clock["pricing"] += time.perf_counter() - began
             # Columns added after this LP have lambda = 0 in its solution.
             x = np.concatenate([x, np.zeros(self.n_cols - len(x))])
+            if exact and least_total == -math.inf:  # a cut-short pricing proves nothing
+                return value, bound, x, False
             if exact and added == 0:
                 # Nothing new prices out: the LP value is the node's bound, unless the
                 # schedules of negative reduced cost were already columns (float noise

@@ -32,11 +32,13 @@ time otherwise.
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from numba import njit, objmode
 
 from tsac_bench.formulations.network import DIRECT, START, AavNetwork
 from tsac_bench.model import Instance, Route, Visit
@@ -186,10 +188,13 @@ class Pricer:
         return self._start_node if node == START else node
 
     def price(self, prices: TaskPrices, restrictions: Restrictions, *, limit: int = 50,
-              label_cap: int | None = None) -> tuple[float, list[Schedule]]:
+              label_cap: int | None = None, deadline: float = math.inf
+              ) -> tuple[float, list[Schedule]]:
         """(least reduced cost, up to ``limit`` schedules of negative reduced cost, least
         first). With ``label_cap`` only the cheapest labels per node and length are kept: a
-        heuristic whose least reduced cost is then not a bound."""
+        heuristic whose least reduced cost is then not a bound. Past ``deadline``
+        (time.perf_counter) the labelling stops: the schedules found so far are returned
+        and the least reduced cost is -inf (nothing is known of it)."""
         n_tasks, size = self.instance.n_tasks, self.capacity + 1
 
         def per_task(values: dict[int, float]) -> np.ndarray:
@@ -234,9 +239,9 @@ class Pricer:
             per_task(prices.closer_time), per_task(prices.visit_bonus),
             per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
             theta_low, theta_high, np.array(sorted(restrictions.arrival_low), np.int64),
-            0 if label_cap is None else label_cap)
-        cost, alive = labels[0], labels[1]
-        least = float(cost.min())
+            0 if label_cap is None else label_cap, deadline)
+        cost, alive, finished = labels[0], labels[1], labels[9]
+        least = float(cost.min()) if finished else -math.inf
         chosen, seen = [], set()
         for k in np.flatnonzero(alive)[np.argsort(cost[alive], kind="stable")]:
             if cost[k] >= -1e-9 or len(chosen) >= limit:
@@ -250,7 +255,7 @@ class Pricer:
     def _tail(self, label: int, labels: tuple) -> tuple[Visit, ...]:
         """The free visits of a finished label, amounts read back from the cell (B, B): at
         each visit the amount that attains the cell's minimum in the parent's table."""
-        cost, _, node, parent, arc, price, low, high, tables = labels
+        cost, _, node, parent, arc, price, low, high, tables, _ = labels
         steps = []
         while parent[label] >= 0:
             steps.append(label)
@@ -406,7 +411,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                anchor_node, anchor_clock, anchor_flown, anchor_visited, anchor_loaded, root,
                cover, aav_time, closer, closer_time, visit_bonus, cut_bonus, arc_bonus,
                forbidden_task, forbidden_arc, amount_low, amount_high, theta_low,
-               theta_high, floored, label_cap):
+               theta_high, floored, label_cap, deadline):
     """Every undominated label from the anchor, extended path length by path length (with
     ``label_cap`` > 0 only the cheapest that many per node and length go on).
 
@@ -446,12 +451,23 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
     scratch_i = np.empty(size, np.int64)
     scratch_v = np.empty(size)
     row = np.empty(size)
-    while frontier.shape[0] > 0:
+    finished = True
+    extended = 0
+    while frontier.shape[0] > 0 and finished:
         produced = np.empty(16, np.int64)
         n_produced = 0
         for lab in frontier:
             if not alive[lab]:
                 continue
+            # A search's time limit must hold inside one call too: one exact pricing
+            # call can take minutes where the labels explode.
+            extended += 1
+            if extended % 256 == 0:
+                with objmode(now="float64"):
+                    now = time.perf_counter()
+                if now > deadline:
+                    finished = False
+                    break
             here = node[lab]
             for a in range(out_first[here], out_first[here + 1]):
                 j = arc_head[a]
@@ -570,7 +586,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
         if label_cap > 0:
             frontier = _cheapest_per_node(frontier, node, cost, alive, label_cap, n_nodes)
     return (cost[:count], alive[:count], node[:count], parent[:count], arc_of[:count],
-            price_of[:count], low_of[:count], high_of[:count], tables[:count])
+            price_of[:count], low_of[:count], high_of[:count], tables[:count], finished)
 
 
 @njit(cache=True)

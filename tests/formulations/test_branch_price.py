@@ -4,6 +4,7 @@ the proven regression optima, full enumeration of schedules, and the MILP in dyn
 from __future__ import annotations
 
 import json
+import math
 import random
 from pathlib import Path
 
@@ -166,6 +167,19 @@ def test_pricing_under_arrival_windows_finds_the_least_of_the_allowed_schedules(
             assert all(_compatible(search.make_column(n, f.tail), windows) for f in found)
             restricted += bool(windows.arrival_low or windows.arrival_high)
     assert restricted >= 3
+
+
+def test_a_pricing_call_stops_at_the_deadline_and_then_claims_no_bound() -> None:
+    # One exact labelling can take minutes where labels explode; a time limit must hold.
+    from tsac_bench.model.generator import generate
+
+    search = BranchPrice(generate("4/10", 1))
+    _, _, duals = search.solve_lp()
+    prices = search.prices(0, duals)
+    least, _ = search.pricers[0].price(prices, Restrictions())
+    assert math.isfinite(least) and least < 0
+    cut, _ = search.pricers[0].price(prices, Restrictions(), deadline=0.0)
+    assert cut == -math.inf
 
 
 @pytest.mark.parametrize("seed", [4, 7])

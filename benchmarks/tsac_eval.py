@@ -36,11 +36,14 @@ SCALES = ("16/40", "32/80")
 DGA_START = "half from the plan in force, 1"
 
 
+BASELINES = ("hocf", "rocf", "dga")
+
+
 def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
-             temperatures: bool) -> list[tuple[str, str, dict]]:
+             temperatures: bool, baselines: tuple[str, ...] = BASELINES
+             ) -> list[tuple[str, str, dict]]:
     tsac = {"policy": policy} if policy else {}
-    rows = [("hocf", "hocf", {}), ("rocf", "rocf", {}), ("dga", "dga", {}),
-            ("tsac-ocf", "tsac-ocf", tsac)]
+    rows = [*((name, name, {}) for name in baselines), ("tsac-ocf", "tsac-ocf", tsac)]
     if temperatures:
         rows += [("tsac-ocf T=0.5", "tsac-ocf", {**tsac, "temperature": 0.5}),
                  ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**tsac, "temperature": 0.0})]
@@ -94,14 +97,19 @@ def main() -> None:
                         help="add hocf and tsac-ocf rows started from the incumbent plan")
     parser.add_argument("--temperatures", action="store_true",
                         help="add tsac-ocf rows sampled at T = 0.5 and T = 0")
+    parser.add_argument("--baselines", nargs="+", choices=BASELINES, default=list(BASELINES),
+                        help="the baseline rows; hocf, the reference of every row, always")
     parser.add_argument("--paired", metavar="LABEL", default=None,
                         help="add a table of every other row's per-instance difference in J "
                              "from this row's (mean, 95 %% interval, instances lower/higher)")
     parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
     args = parser.parse_args()
+    if "hocf" not in args.baselines:
+        parser.error("--baselines: hocf is the reference of every row; keep it")
+    baselines = tuple(args.baselines)
     labels = [label for label, _, _ in variants(
         args.policy, args.ablation, incumbent=args.incumbent_rows,
-        temperatures=args.temperatures)]
+        temperatures=args.temperatures, baselines=baselines)]
     if args.paired is not None and args.paired not in labels:
         parser.error(f"--paired: no row {args.paired!r}; the rows: {', '.join(labels)}")
     if hasattr(os, "sched_setaffinity"):
@@ -111,12 +119,15 @@ def main() -> None:
     command = (f"python benchmarks/tsac_eval.py --instances {args.instances}{source}"
                + (f" --policy {args.policy}" if args.policy else "")
                + f" --scales {' '.join(args.scales)}"
+               + ("" if baselines == BASELINES else f" --baselines {' '.join(baselines)}")
                + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation)
                + (" --incumbent-rows" if args.incumbent_rows else "")
                + (" --temperatures" if args.temperatures else "")
                + (f" --paired {shlex.quote(args.paired)}" if args.paired else ""))
+    names = [name.upper() for name in baselines]
+    against = " and ".join(filter(None, [", ".join(names[:-1]), names[-1]]))
     lines = [
-        "# TSAC-OCF against HOCF, ROCF and DGA (dynamic mode, held-out instances)",
+        f"# TSAC-OCF against {against} (dynamic mode, held-out instances)",
         "",
         f"Command: `{command}`  ",
         f"Machine: {platform.processor() or platform.machine()}, Python "
@@ -130,8 +141,9 @@ def main() -> None:
         + "; method seed 0; dynamic mode (plan at t = 0, "
         "re-plan at each release event); J is the evaluator's J of the executed routes. "
         "Budget of every OCF plan call: no time limit, k_max 200000 decisions, "
-        "c_max 5000 consecutive rejections (DGA: its own generations, no time limit); "
-        "`start, games` is the structure each plan call starts from (`init`) and the games "
+        "c_max 5000 consecutive rejections"
+        + (" (DGA: its own generations, no time limit)" if "dga" in baselines else "")
+        + "; `start, games` is the structure each plan call starts from (`init`) and the games "
         "it plays (`samples`).",
         "",
         "| scale | method | start, games | mean J | median J | mean wall (s) | "
@@ -146,7 +158,7 @@ def main() -> None:
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
         rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,
-                        temperatures=args.temperatures)
+                        temperatures=args.temperatures, baselines=baselines)
         starts = {label: footing(method, settings) for label, method, settings in rows}
         for label, method, settings in rows:
             for instance in instances:

@@ -99,9 +99,10 @@ def main() -> None:
                         help="add tsac-ocf rows sampled at T = 0.5 and T = 0")
     parser.add_argument("--baselines", nargs="+", choices=BASELINES, default=list(BASELINES),
                         help="the baseline rows; hocf, the reference of every row, always")
-    parser.add_argument("--paired", metavar="LABEL", default=None,
+    parser.add_argument("--paired", metavar="LABEL", action="append", default=[],
                         help="add a table of every other row's per-instance difference in J "
-                             "from this row's (mean, 95 %% interval, instances lower/higher)")
+                             "from this row's (mean, 95 %% interval, instances lower/higher); "
+                             "repeatable, a table per reference row")
     parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
     args = parser.parse_args()
     if "hocf" not in args.baselines:
@@ -110,8 +111,9 @@ def main() -> None:
     labels = [label for label, _, _ in variants(
         args.policy, args.ablation, incumbent=args.incumbent_rows,
         temperatures=args.temperatures, baselines=baselines)]
-    if args.paired is not None and args.paired not in labels:
-        parser.error(f"--paired: no row {args.paired!r}; the rows: {', '.join(labels)}")
+    for reference in args.paired:
+        if reference not in labels:
+            parser.error(f"--paired: no row {reference!r}; the rows: {', '.join(labels)}")
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     seeds = range(args.first_seed, args.first_seed + args.instances)
@@ -123,7 +125,7 @@ def main() -> None:
                + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation)
                + (" --incumbent-rows" if args.incumbent_rows else "")
                + (" --temperatures" if args.temperatures else "")
-               + (f" --paired {shlex.quote(args.paired)}" if args.paired else ""))
+               + "".join(f" --paired {shlex.quote(p)}" for p in args.paired))
     names = [name.upper() for name in baselines]
     against = " and ".join(filter(None, [", ".join(names[:-1]), names[-1]]))
     lines = [
@@ -151,7 +153,7 @@ def main() -> None:
         "|---|---|---|---:|---:|---:|---:|---:|",
     ]
     unstable = 0
-    paired_lines: list[str] = []
+    paired_lines: dict[str, list[str]] = {reference: [] for reference in args.paired}
     for scale in args.scales:
         instances = ([read_instance(path) for path in instance_files(scale, args.instances)]
                      if args.paper_mc else [generate(scale, seed) for seed in seeds])
@@ -179,15 +181,15 @@ def main() -> None:
                          f"{statistics.median(values):.2f} "
                          f"| {statistics.fmean(walls[label]):.2f} | {100 * reduction:+.1f} % "
                          f"| {below}/{len(values)} |")
-        if args.paired is not None:
-            paired_lines += paired_rows(scale, costs, args.paired)
+        for reference, table in paired_lines.items():
+            table += paired_rows(scale, costs, reference)
     lines += ["", "`vs HOCF` is (mean J(HOCF) - mean J(method)) / mean J(HOCF): positive means "
               "lower cost than HOCF (the paper reports +39.76 % for TSAC-OCF at 32/80).",
               "OCF plan calls that stopped on a budget rather than a stable structure: "
               f"{unstable}.",
               ""]
-    if args.paired is not None:
-        lines += [f"Paired against `{args.paired}` (same instances): the difference "
+    for reference, table in paired_lines.items():
+        lines += [f"Paired against `{reference}` (same instances): the difference "
                   "d = J(row) - J(reference) per instance; its mean with a 95 % interval "
                   "(mean +- 1.96 standard errors, normal approximation), the mean as a share of "
                   "the reference's mean J, and the instances where the row is lower / higher "
@@ -196,7 +198,7 @@ def main() -> None:
                   "| scale | row | mean d | 95 % interval | mean d / mean J(reference) | "
                   "lower / higher |",
                   "|---|---|---:|---:|---:|---:|",
-                  *paired_lines, ""]
+                  *table, ""]
     args.out.write_text("\n".join(lines))
     print("\n".join(lines))
 

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import tsac_eval  # noqa: E402
+import tsac_eval
 
 
 def test_paired_rows_give_the_mean_difference_its_interval_and_the_counts() -> None:

@@ -36,11 +36,14 @@ SCALES = ("16/40", "32/80")
 DGA_START = "half from the plan in force, 1"
 
 
+BASELINES = ("hocf", "rocf", "dga")
+
+
 def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
-             temperatures: bool) -> list[tuple[str, str, dict]]:
+             temperatures: bool, baselines: tuple[str, ...] = BASELINES
+             ) -> list[tuple[str, str, dict]]:
     tsac = {"policy": policy} if policy else {}
-    rows = [("hocf", "hocf", {}), ("rocf", "rocf", {}), ("dga", "dga", {}),
-            ("tsac-ocf", "tsac-ocf", tsac)]
+    rows = [*((name, name, {}) for name in baselines), ("tsac-ocf", "tsac-ocf", tsac)]
     if temperatures:
         rows += [("tsac-ocf T=0.5", "tsac-ocf", {**tsac, "temperature": 0.5}),
                  ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**tsac, "temperature": 0.0})]
@@ -62,6 +65,23 @@ def footing(method: str, settings: dict) -> str:
     return f"{resolved['init']}, {resolved['samples']}"
 
 
+def paired_rows(scale: str, costs: dict[str, list[float]], reference: str) -> list[str]:
+    """Table rows of every row's per-instance difference in J from ``reference``'s."""
+    base = costs[reference]
+    rows = []
+    for label, values in costs.items():
+        if label == reference:
+            continue
+        diffs = [v - b for v, b in zip(values, base, strict=True)]
+        mean = statistics.fmean(diffs)
+        half = (1.96 * statistics.stdev(diffs) / len(diffs) ** 0.5 if len(diffs) > 1
+                else float("nan"))
+        rows.append(f"| {scale} | {label} | {mean:+.2f} | [{mean - half:+.2f}, "
+                    f"{mean + half:+.2f}] | {100 * mean / statistics.fmean(base):+.1f} % | "
+                    f"{sum(d < 0 for d in diffs)} / {sum(d > 0 for d in diffs)} |")
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--instances", type=int, default=10)
@@ -77,8 +97,23 @@ def main() -> None:
                         help="add hocf and tsac-ocf rows started from the incumbent plan")
     parser.add_argument("--temperatures", action="store_true",
                         help="add tsac-ocf rows sampled at T = 0.5 and T = 0")
+    parser.add_argument("--baselines", nargs="+", choices=BASELINES, default=list(BASELINES),
+                        help="the baseline rows; hocf, the reference of every row, always")
+    parser.add_argument("--paired", metavar="LABEL", action="append", default=[],
+                        help="add a table of every other row's per-instance difference in J "
+                             "from this row's (mean, 95 %% interval, instances lower/higher); "
+                             "repeatable, a table per reference row")
     parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
     args = parser.parse_args()
+    if "hocf" not in args.baselines:
+        parser.error("--baselines: hocf is the reference of every row; keep it")
+    baselines = tuple(args.baselines)
+    labels = [label for label, _, _ in variants(
+        args.policy, args.ablation, incumbent=args.incumbent_rows,
+        temperatures=args.temperatures, baselines=baselines)]
+    for reference in args.paired:
+        if reference not in labels:
+            parser.error(f"--paired: no row {reference!r}; the rows: {', '.join(labels)}")
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     seeds = range(args.first_seed, args.first_seed + args.instances)
@@ -86,11 +121,15 @@ def main() -> None:
     command = (f"python benchmarks/tsac_eval.py --instances {args.instances}{source}"
                + (f" --policy {args.policy}" if args.policy else "")
                + f" --scales {' '.join(args.scales)}"
+               + ("" if baselines == BASELINES else f" --baselines {' '.join(baselines)}")
                + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation)
                + (" --incumbent-rows" if args.incumbent_rows else "")
-               + (" --temperatures" if args.temperatures else ""))
+               + (" --temperatures" if args.temperatures else "")
+               + "".join(f" --paired {shlex.quote(p)}" for p in args.paired))
+    names = [name.upper() for name in baselines]
+    against = " and ".join(filter(None, [", ".join(names[:-1]), names[-1]]))
     lines = [
-        "# TSAC-OCF against HOCF, ROCF and DGA (dynamic mode, held-out instances)",
+        f"# TSAC-OCF against {against} (dynamic mode, held-out instances)",
         "",
         f"Command: `{command}`  ",
         f"Machine: {platform.processor() or platform.machine()}, Python "
@@ -104,8 +143,9 @@ def main() -> None:
         + "; method seed 0; dynamic mode (plan at t = 0, "
         "re-plan at each release event); J is the evaluator's J of the executed routes. "
         "Budget of every OCF plan call: no time limit, k_max 200000 decisions, "
-        "c_max 5000 consecutive rejections (DGA: its own generations, no time limit); "
-        "`start, games` is the structure each plan call starts from (`init`) and the games "
+        "c_max 5000 consecutive rejections"
+        + (" (DGA: its own generations, no time limit)" if "dga" in baselines else "")
+        + "; `start, games` is the structure each plan call starts from (`init`) and the games "
         "it plays (`samples`).",
         "",
         "| scale | method | start, games | mean J | median J | mean wall (s) | "
@@ -113,13 +153,14 @@ def main() -> None:
         "|---|---|---|---:|---:|---:|---:|---:|",
     ]
     unstable = 0
+    paired_lines: dict[str, list[str]] = {reference: [] for reference in args.paired}
     for scale in args.scales:
         instances = ([read_instance(path) for path in instance_files(scale, args.instances)]
                      if args.paper_mc else [generate(scale, seed) for seed in seeds])
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
         rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,
-                        temperatures=args.temperatures)
+                        temperatures=args.temperatures, baselines=baselines)
         starts = {label: footing(method, settings) for label, method, settings in rows}
         for label, method, settings in rows:
             for instance in instances:
@@ -140,11 +181,24 @@ def main() -> None:
                          f"{statistics.median(values):.2f} "
                          f"| {statistics.fmean(walls[label]):.2f} | {100 * reduction:+.1f} % "
                          f"| {below}/{len(values)} |")
+        for reference, table in paired_lines.items():
+            table += paired_rows(scale, costs, reference)
     lines += ["", "`vs HOCF` is (mean J(HOCF) - mean J(method)) / mean J(HOCF): positive means "
               "lower cost than HOCF (the paper reports +39.76 % for TSAC-OCF at 32/80).",
               "OCF plan calls that stopped on a budget rather than a stable structure: "
               f"{unstable}.",
               ""]
+    for reference, table in paired_lines.items():
+        lines += [f"Paired against `{reference}` (same instances): the difference "
+                  "d = J(row) - J(reference) per instance; its mean with a 95 % interval "
+                  "(mean +- 1.96 standard errors, normal approximation), the mean as a share of "
+                  "the reference's mean J, and the instances where the row is lower / higher "
+                  "(negative d: lower cost than the reference).",
+                  "",
+                  "| scale | row | mean d | 95 % interval | mean d / mean J(reference) | "
+                  "lower / higher |",
+                  "|---|---|---:|---:|---:|---:|",
+                  *table, ""]
     args.out.write_text("\n".join(lines))
     print("\n".join(lines))
 

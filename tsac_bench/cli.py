@@ -385,10 +385,20 @@ def train(
     stop_after: Annotated[float | None, typer.Option(
         min=1, help="seconds: end this call at the next episode's end, with a checkpoint to "
         "--resume from")] = None,
+    setting: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="FIELD=VALUE", help="a scalar field of the training configuration "
+        "(TrainConfig), repeatable, e.g. --set signal=td --set replan_share=0; not with "
+        "--resume, which keeps the checkpoint's configuration")] = None,
 ) -> None:
     """Train the TSAC-OCF task-selection policy (discrete SAC, docs/tsac.md)."""
+    from tsac_bench.planning.settings import parse_setting_pairs
+
     if device not in ("auto", "cpu", "cuda"):
         raise TsacBenchError(f"--device: expected auto, cpu or cuda, got {device!r}")
+    settings = parse_setting_pairs(setting or [], "--set")
+    if settings and resume is not None:
+        raise TsacBenchError("--set: not with --resume (a resumed run keeps the configuration "
+                             "in its checkpoint)")
     import torch
     from rich.progress import (
         BarColumn,
@@ -412,7 +422,7 @@ def train(
     if steps is None:
         steps = (torch.load(resume, map_location="cpu", weights_only=False)["config"]["steps"]
                  if resume is not None else TrainConfig().steps)
-    config = TrainConfig(steps=steps, seed=seed)
+    config = TrainConfig.from_settings(settings, "--set", steps=steps, seed=seed)
     columns = (TextColumn("[bold]train"), BarColumn(), MofNCompleteColumn(),
                TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[info]}"))
     with Progress(*columns, console=console) as progress:

@@ -30,19 +30,28 @@ import copy
 import json
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
 from torch import Tensor
 from torch.nn import functional as F
 
+from tsac_bench.errors import InvalidSetting
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import generate
 from tsac_bench.planning import PlanningState, make_allocator
+from tsac_bench.planning.settings import (
+    Constraint,
+    Interval,
+    NoneOr,
+    Options,
+    check_settings,
+    declare,
+)
 from tsac_bench.solvers.ocf.engine import (
     C_MAX,
     K_MAX,
@@ -342,6 +351,8 @@ DEFAULT_CURRICULUM: tuple[tuple[float, tuple[str, ...]], ...] = (
     (0.3, ("8/20", "16/40", "32/80")),
 )
 SIGNALS = ("rollout", "td")
+#: The OCF methods whose selection rule can take the warm-up decisions or finish a rollout.
+RULE_METHODS = ("hocf", "rocf")
 
 
 @dataclass(frozen=True)
@@ -367,7 +378,8 @@ class TrainConfig:
     update_every: int = 2  # td: env steps per gradient update
     curriculum: tuple[tuple[float, tuple[str, ...]], ...] = DEFAULT_CURRICULUM
     #: rollout signal: share of the episodes played on a moment of a simulated dynamic run
-    #: (t = 0 or a re-plan); the others are t = 0 moments (static or released-only).
+    #: (t = 0 or a re-plan); the others are t = 0 moments (static or released-only). The td
+    #: signal ignores it: its episodes are TaskSelectionEnv's default t = 0 moments.
     replan_share: float = 0.5
     label_share: float = 0.25  # rollout: share of the decisions whose actions are labelled
     label_candidates: int = 8  # rollout: most actions labelled per state (drawn uniformly)
@@ -384,6 +396,46 @@ class TrainConfig:
     checkpoint_every: int = 1_000
     net: NetConfig | None = None  # default: d_model 32, 4 heads, 2 layers, ff 64
     sac: SACConfig = field(default_factory=SACConfig)
+
+    #: The fields ``tsac-bench train --set`` may change: the scalar ones, less steps and seed
+    #: (options of their own) and eval_scale (a scale has no constraint to check it by).
+    setting_constraints: ClassVar[Mapping[str, Constraint]] = declare(
+        signal=Options(*SIGNALS),
+        features=Interval(int, min(FEATURE_SETS), max(FEATURE_SETS)),
+        warmup=Interval(int, 0, None),
+        demonstrator=NoneOr(Options(*RULE_METHODS)),
+        pretrain_updates=Interval(int, 0, None),
+        clone_weight=Interval(float, 0, None),
+        clone_until=Interval(float, 0, 1),
+        update_every=Interval(int, 1, None),
+        replan_share=Interval(float, 0, 1),
+        label_share=Interval(float, 0, 1),
+        label_candidates=Interval(int, 2, None),
+        rollouts=Interval(int, 1, None),
+        completion=Options(*RULE_METHODS),
+        label_scale=Interval(float, 0, None, closed="neither"),
+        updates_per_label=Interval(int, 1, None),
+        episode_steps=Interval(int, 1, None),
+        eval_every=Interval(int, 1, None),
+        eval_instances=Interval(int, 1, None),
+        checkpoint_every=Interval(int, 1, None),
+    )
+
+    @classmethod
+    def from_settings(cls, settings: Mapping[str, Any], where: str, **given: Any
+                      ) -> TrainConfig:
+        """A configuration of ``given`` fields and ``settings`` (texts read by their declared
+        type, as a method's ``--set``); ``where`` names their source in the one-line
+        InvalidSetting raised for a field that cannot be set or a value it does not admit."""
+        settable = cls.setting_constraints
+        unknown = sorted(set(settings) - set(settable))
+        if unknown:
+            raise InvalidSetting(f"{where}: TrainConfig has no settable field {unknown[0]!r}; "
+                                 f"the settable ones: {', '.join(settable)}")
+        try:
+            return cls(**given, **check_settings("TrainConfig", cls, settings))
+        except InvalidSetting as exc:
+            raise InvalidSetting(f"{where}: {exc}") from None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:

@@ -4,9 +4,19 @@
     python benchmarks/exact_regression.py prove instances/regression --time-limit 300
     python benchmarks/exact_regression.py prove instances/quick --time-limit 600
 
+    python benchmarks/exact_regression.py prove instances/regression --only reg-static-4-10-s21 \
+        --methods exact-bp --time-limit 600        # the 4/10 instances: exact-bp proves J*,
+    python benchmarks/exact_regression.py prove instances/regression --only ... \
+        --methods exact exact-cpsat --time-limit 60   # the compact models confirm what they can
+
 ``make`` is deterministic (fixed seeds of the paper's scenario generator); ``prove`` solves
-each instance with ``exact`` (HiGHS) and ``exact-cpsat`` and writes ``manifest.json``: J* where
-both prove optimality and agree to 1e-6, otherwise the best J and bound ("feasible").
+each instance with the exact backends (``--methods``, default all) and writes
+``manifest.json``: J* where at least one proves optimality and every backend agrees (equal
+optima, no lower J, no higher bound; tsac_bench/batch/verify.py), otherwise the best J and
+bound ("feasible"). Up to 6 tasks both compact models prove every J*; at the paper's 4/10
+only exact-bp does, so those instances are proved by it and checked against the compact
+models' plans and bounds under a shorter limit (the seeds are those exact-bp proves within
+the limit: the set is chosen by provability, so it is easier than 4/10 at large).
 """
 
 from __future__ import annotations
@@ -25,6 +35,11 @@ STATIC = [(2, 4, (1, 2, 3)), (2, 5, (1, 2, 3)), (2, 6, (1, 2, 3)), (3, 5, (1, 2)
           (3, 6, (1, 2))]
 RELEASES = [(2, 4, (11, 12, 13)), (2, 5, (11, 12, 13)), (2, 6, (11, 12)), (3, 5, (11, 12)),
             (3, 6, (11, 12))]
+#: The paper's smallest scale: the seeds whose optimum exact-bp proved within its limit
+#: (150-600 s; each entry records its command), of those tried: static 21-33 and 36-41,
+#: with releases 31-39 and 41-43.
+STATIC += [(4, 10, (21, 24, 27, 28, 30, 39))]
+RELEASES += [(4, 10, (33, 35, 43))]
 
 
 def make(out: Path) -> None:
@@ -48,13 +63,17 @@ def main(argv: list[str]) -> None:
     prove_cmd.add_argument("--time-limit", type=float, default=300.0)
     prove_cmd.add_argument("--threads", type=int, default=1)
     prove_cmd.add_argument("--only", nargs="*", default=None)
+    prove_cmd.add_argument("--methods", nargs="*", default=None,
+                           help="exact backends to run (default: every exact method)")
     args = parser.parse_args(argv)
     if args.command == "make":
         make(args.out)
     else:
         command = (f"python benchmarks/exact_regression.py prove {args.directory} "
-                   f"--time-limit {args.time_limit:g} --threads {args.threads}")
-        prove(args.directory, args.time_limit, command, args.threads, args.only)
+                   f"--time-limit {args.time_limit:g} --threads {args.threads}"
+                   + (f" --methods {' '.join(args.methods)}" if args.methods else ""))
+        prove(args.directory, args.time_limit, command, args.threads, args.only,
+              methods=args.methods)
 
 
 if __name__ == "__main__":

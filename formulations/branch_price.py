@@ -541,23 +541,21 @@ class BranchPrice:
                     arrivals.setdefault((col.aav, m), []).append((v, col.theta[m]))
             for e in col.arcs:
                 arc[col.aav, e] = arc.get((col.aav, e), 0.0) + v
-        frac = [(abs(v - 0.5), key) for key, v in sorted(visit.items())
-                if INTEGRALITY < v < 1 - INTEGRALITY]
+        frac = _most_fractional_first(visit)
         if frac:
             if self.strong_candidates > 1 and len(frac) > 1:
-                k, m = self.strongest([key for _, key in sorted(frac)[:self.strong_candidates]])
+                k, m = self.strongest(frac[:self.strong_candidates])
             else:
-                (k, m) = min(frac)[1]
+                (k, m) = frac[0]
             return Decision("visit", k, m, "0")
         if self.time_branching:
             split = self.widest_arrival(arrivals)
             if split is not None:
                 (k, m), threshold = split
                 return Decision("time", k, m, "le", threshold)
-        frac = [(abs(v - 0.5), key) for key, v in sorted(arc.items())
-                if INTEGRALITY < v < 1 - INTEGRALITY]
+        frac = _most_fractional_first(arc)
         if frac:
-            (k, e) = min(frac)[1]
+            (k, e) = frac[0]
             return Decision("arc", k, e, "0")
         frac = [(abs(v - math.floor(v) - 0.5), key) for key, v in sorted(amount.items())
                 if abs(v - round(v)) > INTEGRALITY]
@@ -741,6 +739,12 @@ class BranchPrice:
             "wall_time": time.perf_counter() - began,
         }
         return BranchPriceResult(tuple(best_routes), best_J, _finite(global_bound), status, stats)
+
+
+def _most_fractional_first(values: dict[tuple, float]) -> list[tuple]:
+    """The keys of the fractional 0-1 values, nearest to 0.5 first (ties by key)."""
+    return [key for _, key in sorted((abs(v - 0.5), key) for key, v in values.items()
+                                     if INTEGRALITY < v < 1 - INTEGRALITY)]
 
 
 def _finite(value: float | None) -> float | None:

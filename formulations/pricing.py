@@ -197,8 +197,8 @@ class Pricer:
         and the least reduced cost is -inf (nothing is known of it)."""
         n_tasks, size = self.instance.n_tasks, self.capacity + 1
 
-        def per_task(values: dict[int, float]) -> np.ndarray:
-            out = np.zeros(n_tasks)
+        def per_task(values: dict[int, float], fill: float = 0.0, dtype=float) -> np.ndarray:
+            out = np.full(n_tasks, fill, dtype)
             for m, v in values.items():
                 out[m] = v
             return out
@@ -213,18 +213,10 @@ class Pricer:
                 forbidden_arc[self.arc_index[key]] = True
         forbidden_task = np.zeros(n_tasks, np.bool_)
         forbidden_task[list(restrictions.forbidden_tasks)] = True
-        low = np.ones(n_tasks, np.int64)
-        high = np.full(n_tasks, self.capacity, np.int64)
-        for m, v in restrictions.amount_low.items():
-            low[m] = v
-        for m, v in restrictions.amount_high.items():
-            high[m] = v
-        theta_high = np.full(n_tasks, np.inf)
-        theta_low = np.full(n_tasks, -np.inf)
-        for m, v in restrictions.arrival_high.items():
-            theta_high[m] = v
-        for m, v in restrictions.arrival_low.items():
-            theta_low[m] = v
+        low = per_task(restrictions.amount_low, 1, np.int64)
+        high = per_task(restrictions.amount_high, self.capacity, np.int64)
+        theta_low = per_task(restrictions.arrival_low, -np.inf)
+        theta_high = per_task(restrictions.arrival_high, np.inf)
         root = np.full((size, size), np.inf)
         root[self.anchor.peak:, self.anchor.pickup:] = prices.base
         anchor = self.anchor

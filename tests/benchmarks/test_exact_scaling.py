@@ -1,0 +1,65 @@
+"""The exact-scaling benchmark's cache and tables (benchmarks/exact_scaling.py), on hand-made
+runs."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import exact_scaling
+
+
+def row(size: str, seed: int, method: str, J: float, bound: float | None, root: float | None,
+        **extra: float) -> dict:
+    return {"size": size, "seed": seed, "method": method, "time_limit": 600.0, "threads": 1,
+            "status": "feasible", "J": J, "lower_bound": bound, "gap": None, "wall": 600.0,
+            "greedy": 20.0, "root": root, "commit": "abc1234", **extra}
+
+
+def test_a_cached_run_is_not_run_again_and_a_new_one_is_kept(tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch
+                                                             ) -> None:
+    cache = tmp_path / "runs.jsonl"
+    solved = []
+
+    def fake_solve(size: str, seed: int, method: str, time_limit: float, threads: int) -> dict:
+        solved.append((size, seed, method))
+        return row(size, seed, method, 10.0 + seed, 5.0, 4.0)
+
+    monkeypatch.setattr(exact_scaling, "solve_one", fake_solve)
+    first = exact_scaling.run([("3/8", 1, "exact-bp")], 600.0, 1, cache=cache)
+    again = exact_scaling.run([("3/8", 1, "exact-bp"), ("3/8", 2, "exact-bp")], 600.0, 1,
+                              cache=cache)
+    assert solved == [("3/8", 1, "exact-bp"), ("3/8", 2, "exact-bp")]
+    assert [r["J"] for r in first] == [11.0]
+    assert [r["J"] for r in again] == [11.0, 12.0]
+    assert len(cache.read_text().splitlines()) == 2
+    # Another time limit is another run.
+    exact_scaling.run([("3/8", 1, "exact-bp")], 60.0, 1, cache=cache)
+    assert solved[-1] == ("3/8", 1, "exact-bp") and len(solved) == 3
+
+
+def test_bounds_are_shares_of_the_best_plan_any_backend_found() -> None:
+    rows = [row("8/20", 1, "exact", 30.0, 0.0, None),
+            row("8/20", 1, "exact-bp", 16.0, 4.0, 2.0),
+            row("8/20", 2, "exact-bp", 25.0, None, None)]
+    # seed 1: best J min(30, 16, start 20) = 16; bounds 0/16 and 4/16. Seed 2: the start
+    # (20) beats the run's J; exact did not run there and exact-bp has no bound.
+    assert exact_scaling.bound_table(rows, ["8/20"], ("exact", "exact-bp"),
+                                     "lower_bound").splitlines()[2:] == [
+        "| 8/20 | 1 | 16.000000 | 0.0 % | 25.0 % |",
+        "| 8/20 | 2 | 20.000000 | not run | - |",
+    ]
+
+
+def test_the_time_split_sums_each_part_over_the_instances_of_a_size() -> None:
+    rows = [row("4/10", 1, "exact-bp", 10.0, 8.0, 7.0, pricing_time=50.0, lp_time=30.0,
+                branching_time=10.0, other_time=10.0, nodes=10, columns=100),
+            row("4/10", 2, "exact-bp", 10.0, 8.0, 7.0, pricing_time=250.0, lp_time=50.0,
+                branching_time=0.0, other_time=0.0, nodes=30, columns=300)]
+    # pricing 300 of 400 s, LP 80, branching 10, other 10.
+    assert exact_scaling.time_split_table(rows, ["4/10"]).splitlines()[2] == \
+        "| 4/10 | 75 % | 20 % | 2 % | 2 % | 20 | 200 |"

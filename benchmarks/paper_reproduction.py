@@ -192,6 +192,36 @@ def gap_brackets(frame: pd.DataFrame, table: pd.DataFrame) -> list[str]:
                      f"({percent(rows['at_least'].mean())}) | "
                      f"{percent(rows['at_most'].median())} "
                      f"({percent(rows['at_most'].mean())}) |")
+    return [*lines, "", *headline_brackets(ran)]
+
+
+def headline_brackets(ran: pd.DataFrame) -> list[str]:
+    """The brackets' medians in the shape of the README's headline table (dynamic mode: one
+    row per method, one column per scale)."""
+    dynamic = ran[ran["mode"] == "dynamic"]
+    scales = [s for s in SCALES if s in set(dynamic["scale"])]
+    counts = dynamic.groupby("scale")["instance"].nunique()
+    lines = ["Dynamic mode, in the shape of the README's headline table: the median gap to J* "
+             "lies between the two numbers (one number: J* proven on every instance; "
+             "\"no bound\": only the lower end is known).", "",
+             "| method | " + " | ".join(f"{s} ({counts[s]} inst.)" for s in scales) + " |",
+             "|---|" + "---:|" * len(scales)]
+    for method, rows in sorted(dynamic.groupby("method")):
+        cells = []
+        for scale in scales:
+            at = rows[rows["scale"] == scale]
+            # One instance without a bound leaves the median without an upper end.
+            low = at["at_least"].median()
+            high = at["at_most"].median() if at["at_most"].notna().all() else float("nan")
+            if at.empty:
+                cells.append("")
+            elif pd.isna(high):
+                cells.append(f">= {percent(low)} (no bound)")
+            elif abs(high - low) < 5e-4:
+                cells.append(percent(low))
+            else:
+                cells.append(f"{percent(low)} - {percent(high)}")
+        lines.append(f"| {method} | " + " | ".join(cells) + " |")
     return lines
 
 

@@ -32,3 +32,24 @@ def test_before_and_after_means_changes_and_ranks(tmp_path: Path) -> None:
 def test_a_missing_bound_prints_as_no_bound() -> None:
     assert paper_reproduction.percent(float("nan")) == "no bound"
     assert paper_reproduction.percent(0.1234) == "12.3%"
+
+
+def test_headline_brackets_take_each_end_s_median_and_need_every_bound() -> None:
+    def bracket(scale: str, method: str, instance: str, low: float, high: float) -> dict:
+        return {"mode": "dynamic", "scale": scale, "method": method, "instance": instance,
+                "at_least": low, "at_most": high}
+
+    ran = pd.DataFrame([
+        # 4/10: three instances, J* proven on one (low == high there).
+        bracket("4/10", "dga", "a", 0.10, 0.10), bracket("4/10", "dga", "b", 0.20, 0.50),
+        bracket("4/10", "dga", "c", 0.30, 0.90),
+        # 8/20: one instance without a bound; the other's bound must not stand for both.
+        bracket("8/20", "dga", "d", 0.00, 4.00), bracket("8/20", "dga", "e", 0.40, float("nan")),
+        bracket("4/10", "hocf", "a", 1.00, 1.00), bracket("4/10", "hocf", "b", 1.00, 1.00),
+        bracket("4/10", "hocf", "c", 1.00, 1.00),
+        {**bracket("4/10", "dga", "a", 9.0, 9.0), "mode": "static"},  # not in the headline
+    ])
+    lines = paper_reproduction.headline_brackets(ran)
+    assert lines[2] == "| method | 4/10 (3 inst.) | 8/20 (2 inst.) |"
+    assert lines[4] == "| dga | 20.0% - 50.0% | >= 20.0% (no bound) |"
+    assert lines[5] == "| hocf | 100.0% |  |"

@@ -120,7 +120,8 @@ class BranchPrice:
                  heuristic_cap: int = 3,
                  columns_per_aav: int = 30, closer_rows: bool = True,
                  cover_cuts: bool = True, symmetry: bool = True, threads: int = 1,
-                 strong_candidates: int = 4, time_branching: bool = True) -> None:
+                 strong_candidates: int = 4, time_branching: bool = True,
+                 goods_time_rows: bool = True) -> None:
         import highspy
 
         self.instance = instance
@@ -176,6 +177,11 @@ class BranchPrice:
         self.closer_time = {m: self._row(0.0, self.inf) for m in self.timed}
         self.aav_time = {(k, m): self._row(0.0, self.inf) for k in range(n_aavs)
                          for m in self.pricers[k].network.tasks if m in self.timed}
+        # Goods-weighted arrival rows R_m Ctime_m >= sum_c theta_cm a_cm lambda_c (docs:
+        # valid for an optimum whose members bring no more than R_m in all), on the tasks
+        # no committed visit has served yet.
+        self.goods_time = {m: self._row(0.0, self.inf) for m in self.timed
+                           if m not in in_prefix} if goods_time_rows else {}
         self.covered = {}
         for m in self.tasks:
             demand = instance.tasks[m].demand
@@ -183,6 +189,8 @@ class BranchPrice:
         for m in self.timed:
             ctime = [(self.closer_time[m], 1.0)] + [(r, 1.0) for (k, j), r in
                                                      self.aav_time.items() if j == m]
+            if m in self.goods_time:
+                ctime.append((self.goods_time[m], float(instance.tasks[m].demand)))
             self._col(w2, 0.0, self.inf, ctime)
             nobody = [(self.closer[m], 1.0), (self.closer_time[m], -1.0)] + [
                 (r, -1.0) for (k, j), r in self.aav_time.items() if j == m]
@@ -286,6 +294,8 @@ class BranchPrice:
         entries += [(self.cover[m], float(a)) for m, a in col.amounts.items() if m in self.cover]
         entries += [(self.aav_time[n, m], -t) for m, t in col.theta.items()
                     if (n, m) in self.aav_time]
+        entries += [(self.goods_time[m], -t * col.amounts[m]) for m, t in col.theta.items()
+                    if m in self.goods_time]
         for key, (row, _) in self.robust.items():
             if _robust_matches(key, col):
                 entries.append((row, 1.0))
@@ -410,6 +420,7 @@ class BranchPrice:
         aav_time = {m: duals[r] for (k, m), r in self.aav_time.items() if k == n}
         closer = {m: duals[r] for m, r in self.closer.items()}
         closer_time = {m: duals[r] for m, r in self.closer_time.items()}
+        goods_time = {m: duals[r] for m, r in self.goods_time.items()}
         visit_bonus, arc_bonus = {}, {}
         for (kind, k, key), (row, _) in self.robust.items():
             if k == n and duals[row] != 0.0:
@@ -428,7 +439,8 @@ class BranchPrice:
             elif n == n2:
                 cut_bonus[j] = cut_bonus.get(j, 0.0) - duals[row]
         prices = TaskPrices(0.0, cover, aav_time, closer, closer_time,
-                            visit_bonus=visit_bonus, arc_bonus=arc_bonus, cut_bonus=cut_bonus)
+                            visit_bonus=visit_bonus, arc_bonus=arc_bonus, cut_bonus=cut_bonus,
+                            goods_time=goods_time)
         prices.base = self.reduced_cost(self.make_column(n, ()), prices) - duals[self.conv[n]]
         return prices
 
@@ -445,6 +457,7 @@ class BranchPrice:
         rc = col.op - math.fsum(prices.cover.get(m, 0.0) * a for m, a in col.amounts.items())
         for m, t in col.theta.items():
             rc += prices.aav_time.get(m, 0.0) * t
+            rc += prices.goods_time.get(m, 0.0) * t * col.amounts[m]
         for m in cls.best_closes(col, prices):
             rc += prices.closer_time.get(m, 0.0) * col.theta[m] - prices.closer.get(m, 0.0)
         rc -= sum(prices.visit_bonus.get(m, 0.0) for m in col.free_amounts)

@@ -22,8 +22,12 @@ node when every completion of L2 is a completion of L1 at no higher reduced cost
   when the full-range cost is at least the cost of any leg (q is then non-decreasing in Dcum),
   or Dcum1 == Dcum2 otherwise;
   and, where a branching decision asks a task's arrival to be later than a floor
-  (``Restrictions.arrival_low``): clock1 == clock2, or L2 has visited that task, or every
-  arrival from clock1 is past the floor (an earlier clock could otherwise reach it too early).
+  (``Restrictions.arrival_low``): clock1 == clock2, or L2 has visited that task, or L2 can
+  no longer reach it on time, or every arrival at it from L1 is past the floor (an earlier
+  clock could otherwise reach it too early). "Reach" uses the straight leg from the label's
+  task, which no path beats (distances obey the triangle inequality, and waiting for a
+  window only adds time), shortened by a relative 1e-9 so that the test stays on the safe
+  side of the float sums of the real legs.
 Arrival and Dcum are accumulated leg by leg in the evaluator's order of float operations, so
 a schedule's arrivals (hence its time-window feasibility and price) are the evaluator's to
 the last bit. The labelling runs compiled (numba): pricing is nearly all of the search's
@@ -48,9 +52,11 @@ from tsac_bench.planning import Anchor as PlanningAnchor
 @dataclass
 class TaskPrices:
     """The duals one AAV's pricing sees. A visit to task m at arrival t with amount a adds
-    op_cost - cover[m] * a + aav_time[m] * theta + min(0, closer_time[m] * theta - closer[m])
-    - visit_bonus[m] - cut_bonus[m] to the reduced cost, theta = (t - t_start) / horizon
-    (time terms only for tasks in ``timed``); each arc adds -arc_bonus[(tail, head, mode)]."""
+    op_cost - (cover[m] - goods_time[m] * theta) * a + aav_time[m] * theta
+    + min(0, closer_time[m] * theta - closer[m]) - visit_bonus[m] - cut_bonus[m] to the
+    reduced cost, theta = (t - t_start) / horizon (time terms only for tasks in ``timed``);
+    each arc adds -arc_bonus[(tail, head, mode)]. goods_time[m] >= 0, so the price per kg
+    falls with the arrival: an earlier clock is still never worse."""
 
     base: float  # reduced cost of the empty schedule (prefix only): -convexity dual + prefix
     cover: dict[int, float]
@@ -60,6 +66,7 @@ class TaskPrices:
     visit_bonus: dict[int, float] = field(default_factory=dict)  # branching rows
     cut_bonus: dict[int, float] = field(default_factory=dict)  # coalition cover cuts
     arc_bonus: dict[tuple[int, int, int], float] = field(default_factory=dict)
+    goods_time: dict[int, float] = field(default_factory=dict)  # goods-weighted arrival rows
 
 
 @dataclass
@@ -179,6 +186,10 @@ class Pricer:
         self._t_start, self._t_end, self._demand, self._is_delivery = (t_start, t_end, demand,
                                                                        delivery)
         self._timed = np.array([j in timed for j in range(n_tasks)], np.bool_)
+        # Straight-leg flying time from each task (a label's node) to each task, shortened
+        # by a relative 1e-9 so that it stays below the float sums of any real path's legs.
+        self._reach = np.ascontiguousarray(
+            instance.dist[:n_tasks, :n_tasks] / self.speed * (1.0 - 1e-9))
         words = max(1, (n_tasks + 63) // 64)
         self._anchor_visited = np.array(
             [_signed_word((anchor.visited >> (64 * w)) & (2**64 - 1)) for w in range(words)],
@@ -228,10 +239,11 @@ class Pricer:
             self._node(anchor.node), anchor.clock, anchor.flown, self._anchor_visited,
             anchor.loaded, root,
             per_task(prices.cover), per_task(prices.aav_time), per_task(prices.closer),
-            per_task(prices.closer_time), per_task(prices.visit_bonus),
+            per_task(prices.closer_time), per_task(prices.goods_time),
+            per_task(prices.visit_bonus),
             per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
             theta_low, theta_high, np.array(sorted(restrictions.arrival_low), np.int64),
-            0 if label_cap is None else label_cap, deadline)
+            self._reach, 0 if label_cap is None else label_cap, deadline)
         cost, alive, finished = labels[0], labels[1], labels[9]
         least = float(cost.min()) if finished else -math.inf
         chosen, seen = [], set()
@@ -364,7 +376,7 @@ def _first_visit_table(dst, least, delivery, price, low, high):
 
 @njit(cache=True)
 def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone,
-               floored, theta_low, t_start, horizon):
+               floored, theta_low, t_start, t_end, horizon, reach):
     """The rule of the module docstring; the cheap scalar tests go first (the table test
     needs cost_a <= cost_b, its cell (B, B))."""
     if clock[a] > clock[b] or cost[a] > cost[b] or (loaded[b] and not loaded[a]):
@@ -373,12 +385,15 @@ def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcu
         if visited[a, w] & ~visited[b, w]:
             return False
     # A task that must be reached late (theta > theta_low): b's completion may reach it late
-    # enough where a's earlier clock does not, unless b cannot visit it any more, both
-    # arrive alike, or any arrival from a's clock is already late enough.
+    # enough where a's earlier clock does not, unless b cannot visit it any more (visited,
+    # or out of reach before its window closes), both arrive alike, or any arrival from
+    # a is already late enough. reach[m] is the straight leg's time from a's and b's task.
     if clock[a] < clock[b]:
         for m in floored:
-            if not (visited[b, m >> 6] >> (m & 63)) & 1 and \
-                    (clock[a] - t_start[m]) / horizon <= theta_low[m]:
+            if (visited[b, m >> 6] >> (m & 63)) & 1 or clock[b] + reach[m] > t_end[m]:
+                continue
+            earliest = max(t_start[m], clock[a] + reach[m])
+            if (earliest - t_start[m]) / horizon <= theta_low[m]:
                 return False
     if not (flown[a] > max_range and flown[b] > max_range):
         if dcum_monotone:
@@ -401,9 +416,10 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                t_start, t_end, demand, is_delivery, timed,
                speed, capacity, max_range, per_metre, full, dcum_monotone, horizon,
                anchor_node, anchor_clock, anchor_flown, anchor_visited, anchor_loaded, root,
-               cover, aav_time, closer, closer_time, visit_bonus, cut_bonus, arc_bonus,
+               cover, aav_time, closer, closer_time, goods_time, visit_bonus, cut_bonus,
+               arc_bonus,
                forbidden_task, forbidden_arc, amount_low, amount_high, theta_low,
-               theta_high, floored, label_cap, deadline):
+               theta_high, floored, reach, label_cap, deadline):
     """Every undominated label from the anchor, extended path length by path length (with
     ``label_cap`` > 0 only the cheapest that many per node and length go on).
 
@@ -485,15 +501,16 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                 c = per_metre * leg if f <= max_range else full
                 c -= visit_bonus[j] + arc_bonus[a]
                 c -= cut_bonus[j]
+                p = cover[j]
                 if timed[j]:
                     theta = (t - t_start[j]) / horizon
                     if theta > theta_high[j] or theta <= theta_low[j]:
                         continue
                     c += aav_time[j] * theta
                     c += min(0.0, closer_time[j] * theta - closer[j])
+                    p -= goods_time[j] * theta
                 a_low = amount_low[j]
                 a_high = min(demand[j], capacity, amount_high[j])
-                p = cover[j]
                 # With no value on goods, more than the least amount only uses capacity.
                 if p <= 0.0:
                     a_high = min(a_high, a_low)
@@ -537,7 +554,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                         if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
                                                        flown, tables, max_range,
                                                        dcum_monotone, floored, theta_low,
-                                                       t_start, horizon):
+                                                       t_start, t_end, horizon, reach[j]):
                             rejected = True
                             break
                 if rejected:
@@ -551,7 +568,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                             tasks & ~bucket_tasks[j, i] == 0 and \
                             _dominates(k, other, clock, cost, loaded, visited, flown, tables,
                                        max_range, dcum_monotone, floored, theta_low,
-                                       t_start, horizon):
+                                       t_start, t_end, horizon, reach[j]):
                         alive[other] = False
                         continue
                     bucket[j, kept] = other

@@ -173,6 +173,7 @@ class BranchPriceAllocator(Settings):
         symmetry=Boolean(),
         strong_candidates=Interval(int, 1, None),
         time_branching=Boolean(),
+        goods_time_rows=Boolean(),
         threads=Interval(int, 1, None),
     )
 
@@ -180,7 +181,7 @@ class BranchPriceAllocator(Settings):
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
                  closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
                  strong_candidates: int = 4, time_branching: bool = True,
-                 threads: int = 1) -> None:
+                 goods_time_rows: bool = True, threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
         self.threads = threads
@@ -191,6 +192,7 @@ class BranchPriceAllocator(Settings):
         self.closer_rows = closer_rows
         self.strong_candidates = strong_candidates
         self.time_branching = time_branching
+        self.goods_time_rows = goods_time_rows
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -216,7 +218,8 @@ class BranchPriceAllocator(Settings):
                                  closer_rows=self.closer_rows, cover_cuts=self.cover_cuts,
                                  symmetry=self.symmetry,
                                  strong_candidates=self.strong_candidates,
-                                 time_branching=self.time_branching, threads=self.threads)
+                                 time_branching=self.time_branching,
+                                 goods_time_rows=self.goods_time_rows, threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

@@ -91,6 +91,8 @@ def _random_prices(search: BranchPrice, n: int, rng: random.Random) -> TaskPrice
         aav_time={m: rng.uniform(0, 5) for m in tasks},
         closer={m: rng.uniform(0, 3) for m in tasks},
         closer_time={m: rng.uniform(0, 5) for m in tasks},
+        # Up to 30 per kg at theta = 1: the price per kg changes sign with the arrival.
+        goods_time={m: rng.choice([0.0, rng.uniform(0, 30)]) for m in tasks},
         visit_bonus={m: rng.uniform(0, 1) for m in tasks if rng.random() < 0.5},
         cut_bonus={m: rng.uniform(0, 2) for m in tasks if rng.random() < 0.5},
         arc_bonus={(a.tail, a.head, a.mode): rng.uniform(0, 1)

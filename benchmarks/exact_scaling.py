@@ -22,6 +22,7 @@ names every commit its rows come from.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -49,6 +50,7 @@ NOTES = (
 
 
 def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int) -> dict:
+    commit = _commit()
     instance = generate(size, seed)
     began = time.perf_counter()
     outcome = solve(instance, method, seed=0, time_limit=time_limit,
@@ -59,7 +61,7 @@ def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int
            "threads": threads, "status": stats["status"], "J": outcome.cost,
            "lower_bound": stats["lower_bound"], "gap": stats.get("mip_gap"), "wall": wall,
            "greedy": stats.get("warm_start_J"), "root": stats.get("root_bound"),
-           "commit": _commit(),
+           "commit": commit,
            **{key: stats[key] for key in (*TIME_SPLIT, "nodes", "columns") if key in stats}}
     if method == "exact" and size not in LARGE:
         # Outside the timed solve: the LP relaxation of the model HiGHS is given.
@@ -73,7 +75,10 @@ def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int
 TIME_SPLIT = ("pricing_time", "lp_time", "branching_time", "other_time")
 
 
+@functools.cache
 def _commit() -> str:
+    """The commit checked out when this process first asks: the code it imported, even if
+    the checkout moves on during a long run."""
     try:
         return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, text=True,
                               capture_output=True, check=True).stdout.strip()

@@ -1,13 +1,13 @@
 """Root bounds of exact-bp's route master against the MILP's LP relaxations, as % of J*.
 
-    python benchmarks/exact_bp_root.py --sizes 2-6 3-5 3-6
+    python benchmarks/exact_bp_root.py --sizes 2-6 3-5 3-6 4-10
 
 Instances: the regression set (instances/regression, J* proven by both compact backends)
 whose name has one of the given ``AAVs-tasks`` sizes. Columns: the MILP's LP with big-M time
 rows only, with arrival times on the arcs ("arc-flow"), the default MILP's LP (cover cuts
 too); the route master of exact-bp after column generation to convergence (exact pricing)
-with the per-AAV time rows only, with the closer rows too, and with the coalition cover cuts
-as well (exact-bp's root). Writes the
+with the per-AAV time rows only, with the closer rows too, with the coalition cover cuts as
+well, and with the goods-time rows as well (exact-bp's root). Writes the
 table to stdout and to ``--out`` (the table of docs/formulations.md, "exact-bp").
 """
 
@@ -36,18 +36,20 @@ def main(argv: list[str]) -> None:
     args = parser.parse_args(argv)
     manifest = json.loads((REGRESSION / "manifest.json").read_text())["instances"]
     lines = ["| instance | J* | big-M LP | arc-flow LP | default MILP LP | route master, "
-             "per-AAV time rows | + closer rows | + cover cuts (exact-bp root) | columns | "
-             "root seconds |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "per-AAV time rows | + closer rows | + cover cuts | + goods-time rows (exact-bp "
+             "root) | columns | root seconds |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, entry in sorted(manifest.items()):
         if not any(f"-{size}-" in name for size in args.sizes):
             continue
         instance = read_instance(REGRESSION / entry["file"])
         J_star = entry["J_star"]
         milp = [root_bound(instance, v, 0)[0] for v in ("big-M", "time flow", "default")]
-        plain = BranchPrice(instance, closer_rows=False, cover_cuts=False).root()
-        closer = BranchPrice(instance, cover_cuts=False).root()
+        plain = BranchPrice(instance, closer_rows=False, cover_cuts=False,
+                            goods_time_rows=False).root()
+        closer = BranchPrice(instance, cover_cuts=False, goods_time_rows=False).root()
+        cuts = BranchPrice(instance, goods_time_rows=False).root()
         full = BranchPrice(instance).root()
-        bounds = [*milp, plain["lp"], closer["lp"], full["lp"]]
+        bounds = [*milp, plain["lp"], closer["lp"], cuts["lp"], full["lp"]]
         row = (f"| {name} | {J_star:.4f} | "
                + " | ".join(f"{100 * b / J_star:.1f}" for b in bounds)
                + f" | {full['columns']} | {full['seconds']:.1f} |")

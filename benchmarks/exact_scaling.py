@@ -254,8 +254,8 @@ def main(argv: list[str]) -> None:
         "Runs:",
         "",
         "| size | seed | backend | status | J | lower bound | gap | time (s) | start J | "
-        "root bound |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "root bound | commit |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         bound = "-" if r["lower_bound"] is None else f"{r['lower_bound']:.6f}"
@@ -263,7 +263,8 @@ def main(argv: list[str]) -> None:
         start = "-" if r["greedy"] is None else f"{r['greedy']:.6f}"
         text.append(f"| {r['size']} | {r['seed']} | {r['method']} | {r['status']} | "
                     f"{r['J']:.6f} | {bound} | {gap} | {r['wall']:.1f} | {start} | "
-                    + ("-" if r["root"] is None else f"{r['root']:.6f}") + " |")
+                    + ("-" if r["root"] is None else f"{r['root']:.6f}")
+                    + f" | {r.get('commit', 'unknown')} |")
     args.out.write_text("\n".join(text) + "\n")
 
 

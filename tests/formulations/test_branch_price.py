@@ -356,3 +356,21 @@ def test_pricing_in_the_simulators_states_finds_the_least_reduced_cost(seed: int
         search = BranchPrice(instance, sorted(state.visible), state.committed, state.time)
         checked += _pricing_matches_every_schedule(search, rng)
     assert checked >= 4
+
+
+@pytest.mark.parametrize(("name", "without", "with_rows"), [
+    # (instance, root without the goods-time rows, root with them), % of J*
+    # (reports/exact-bp-root.md).
+    ("reg-static-2-6-s3", 92.3, 100.0),
+    ("reg-release-3-5-s12", 82.0, 95.0),
+])
+def test_goods_time_rows_lift_the_root_and_stay_below_the_optimum(
+        name: str, without: float, with_rows: float) -> None:
+    instance = read_instance(REGRESSION / MANIFEST[name]["file"])
+    J_star = MANIFEST[name]["J_star"]
+    plain = BranchPrice(instance, goods_time_rows=False).root()
+    lifted = BranchPrice(instance).root()
+    assert plain["converged"] and lifted["converged"]
+    assert 100 * plain["lp"] / J_star == pytest.approx(without, abs=0.05)
+    assert 100 * lifted["lp"] / J_star == pytest.approx(with_rows, abs=0.05)
+    assert lifted["lp"] <= J_star + 1e-6 * J_star

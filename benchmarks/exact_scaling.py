@@ -41,6 +41,8 @@ ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ("exact", "exact-cpsat", "exact-bp")
 #: Sizes from which only the bound against the best plan is reported (none is proved).
 LARGE = ("8/20", "16/40", "32/80")
+#: exact-bp's time split (its stats), summed per size in the report.
+TIME_SPLIT = ("pricing_time", "lp_time", "branching_time", "other_time")
 NOTES = (
     "Notes: an unproved run counts as slower than the limit in the median. The gap of an "
     "optimal CP-SAT run is the scaling slack its reported bound subtracts (docs/"
@@ -72,9 +74,6 @@ def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int
     return row
 
 
-TIME_SPLIT = ("pricing_time", "lp_time", "branching_time", "other_time")
-
-
 @functools.cache
 def _commit() -> str:
     """The commit checked out when this process first asks: the code it imported, even if
@@ -91,13 +90,11 @@ def _key(size: str, seed: int, method: str, time_limit: float, threads: int) -> 
 
 
 def _cached(cache: Path | None) -> dict[tuple, dict]:
-    done: dict[tuple, dict] = {}
-    if cache is not None and cache.exists():
-        for line in cache.read_text().splitlines():
-            row = json.loads(line)
-            done[_key(row["size"], row["seed"], row["method"], row["time_limit"],
-                      row["threads"])] = row
-    return done
+    if cache is None or not cache.exists():
+        return {}
+    rows = (json.loads(line) for line in cache.read_text().splitlines())
+    return {_key(r["size"], r["seed"], r["method"], r["time_limit"], r["threads"]): r
+            for r in rows}
 
 
 def run(keys: list[tuple], time_limit: float, threads: int, jobs: int = 1,
@@ -108,13 +105,12 @@ def run(keys: list[tuple], time_limit: float, threads: int, jobs: int = 1,
     done = _cached(cache)
     todo = [key for key in keys if _key(*key, time_limit, threads) not in done]
 
-    def keep(row: dict) -> dict:
+    def keep(row: dict) -> None:
         if cache is not None:
             cache.parent.mkdir(parents=True, exist_ok=True)
             with cache.open("a") as handle:
                 handle.write(json.dumps(row) + "\n")
         done[_key(row["size"], row["seed"], row["method"], time_limit, threads)] = row
-        return row
 
     if jobs == 1:
         for key in todo:

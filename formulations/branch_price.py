@@ -23,8 +23,9 @@ schedule with every subset S are the LP of "closer" variables z_cm in [0, lambda
 picks the best S of a new schedule, so its reduced cost is
 op_c - dual(conv_k) + sum_m [-dual(cover_m) a_cm + dual(aav_km) theta_cm
                              + min(0, dual(closer_time_m) theta_cm - dual(closer_m))],
-the labelling's objective. With every AAV's least reduced cost rc_k (exact pricing), the
-Lagrangian bound LP + sum_k min(0, rc_k) is valid at every iteration.
+the labelling's objective. With a lower bound rc_k on every AAV's least reduced cost (the
+exact labelling's, or the ng relaxation's), the Lagrangian bound LP + sum_k min(0, rc_k) is
+valid at every iteration.
 
 Branching, in this order, on a fractional
 1. visit x_km = sum of lambda over k's columns that visit m (free part; of the most
@@ -76,6 +77,16 @@ RC_TOLERANCE = 1e-9
 PRUNE_TOLERANCE = 1e-9
 #: A branching quantity within this of an integer counts as integral.
 INTEGRALITY = 1e-6
+#: HiGHS's ``simplex_strategy`` values.
+DUAL_SIMPLEX, PRIMAL_SIMPLEX = 1, 4
+#: From this many tasks up, by default: the ng relaxation before the exact labelling (with
+#: neighbourhoods of NG_SIZE tasks) and primal re-solves after columns are added. At 16/40
+#: they gave the first bound (no exact pricing round finished before); at 4/10 (10 tasks)
+#: the relaxation costs as much per call as the exact labelling (8 of 10 tasks remembered)
+#: and is mostly followed by it, and the primal re-solves' other duals changed the tree
+#: (seed 4: 120 s -> 153 s).
+LARGE_FROM_TASKS = 30
+NG_SIZE = 8
 
 Arc3 = tuple[int, int, int]
 
@@ -121,7 +132,9 @@ class BranchPrice:
                  columns_per_aav: int = 30, closer_rows: bool = True,
                  cover_cuts: bool = True, symmetry: bool = True, threads: int = 1,
                  strong_candidates: int = 4, time_branching: bool = True,
-                 goods_time_rows: bool = True) -> None:
+                 goods_time_rows: bool = True, ng_size: int | None = None,
+                 primal_resolves: bool | None = None,
+                 heuristic_round_columns: int = 120) -> None:
         import highspy
 
         self.instance = instance
@@ -144,6 +157,12 @@ class BranchPrice:
         self.closer_rows = closer_rows
         self.strong_candidates = strong_candidates
         self.time_branching = time_branching
+        # None: the large-instance measures from LARGE_FROM_TASKS tasks up (docs).
+        large = len(self.tasks) >= LARGE_FROM_TASKS
+        self.ng_size = ng_size if ng_size is not None else (NG_SIZE if large else 0)
+        self.primal_resolves = primal_resolves if primal_resolves is not None else large
+        self.heuristic_round_columns = heuristic_round_columns
+        self._heuristic_next = 0  # the AAV the next heuristic round starts with
         w1, w2, w3 = instance.weights
         self.constant = (instance.unserved_task_cost * (instance.n_tasks - len(self.tasks))
                          + w1 * len(self.tasks) + w2 * len(self.late_tasks))
@@ -160,7 +179,8 @@ class BranchPrice:
                                   trailing, prefix.last, leaves.time)
             anchor = anchor_of(instance, n, self.committed[n], prefix.trailing_depot,
                                prefix.last, leaves)
-            self.pricers.append(Pricer(instance, n, network, anchor, self.timed))
+            self.pricers.append(Pricer(instance, n, network, anchor, self.timed,
+                                       self.ng_size))
         self.identical = _identical(instance, self.committed)
 
         # --- the LP ----------------------------------------------------------------------
@@ -349,12 +369,22 @@ class BranchPrice:
         basis.valid = True
         self.h.setBasis(basis)
 
-    def solve_lp(self) -> tuple[float, np.ndarray, np.ndarray]:
+    def solve_lp(self, primal: bool = False) -> tuple[float, np.ndarray, np.ndarray]:
+        """The LP's value (constants included), primal and row duals. ``primal``: by the
+        primal simplex, for a re-solve after columns were added (the basis stays primal
+        feasible; at 16/40 the dual simplex took twice as long per re-solve); a primal run
+        that does not end optimal is repeated by the dual simplex (HiGHS's primal solver
+        has had cycling reports)."""
         import highspy
 
+        optimal = highspy.HighsModelStatus.kOptimal
+        self.h.setOptionValue("simplex_strategy", PRIMAL_SIMPLEX if primal else DUAL_SIMPLEX)
         self.h.run()
+        if primal and self.h.getModelStatus() != optimal:
+            self.h.setOptionValue("simplex_strategy", DUAL_SIMPLEX)
+            self.h.run()
         status = self.h.getModelStatus()
-        if status != highspy.HighsModelStatus.kOptimal:
+        if status != optimal:
             raise RuntimeError(f"master LP not optimal: {self.h.modelStatusToString(status)}")
         solution = self.h.getSolution()
         value = self.h.getInfo().objective_function_value + self.constant
@@ -470,45 +500,87 @@ class BranchPrice:
                           deadline: float, clock: dict[str, float]
                           ) -> tuple[float, float, np.ndarray, bool]:
         """(LP value, best Lagrangian bound, primal, converged). Stops early when the
-        bound reaches ``cutoff`` or at ``deadline``."""
+        bound reaches ``cutoff`` or at ``deadline``.
+
+        Pricing goes from cheap to exact: the heuristic labelling; when it finds nothing,
+        the ng relaxation (``ng_size`` > 0), whose least reduced costs already give a
+        Lagrangian bound and whose elementary schedules are columns; when that finds no
+        column, the exact labelling, only for the AAVs whose relaxed least is negative
+        (for the others the exact least is no lower than the relaxed one, >= -tolerance)."""
         bound = -math.inf
+        n_aavs = self.instance.n_aavs
+        columns_added = False  # the node's first LP follows bound changes: dual simplex
         while True:
             began = time.perf_counter()
-            value, x, duals = self.solve_lp()
+            value, x, duals = self.solve_lp(primal=columns_added and self.primal_resolves)
+            columns_added = True
             clock["lp"] += time.perf_counter() - began
             began = time.perf_counter()
-            prices = [self.prices(n, duals) for n in range(self.instance.n_aavs)]
+            prices = [self.prices(n, duals) for n in range(n_aavs)]
+            tolerance = RC_TOLERANCE * max(1.0, abs(value))
             added = 0
             if self.heuristic_cap:
-                for n, pricer in enumerate(self.pricers):
-                    _, found = pricer.price(prices[n], restrictions[n],
-                                            limit=self.columns_per_aav,
-                                            label_cap=self.heuristic_cap, deadline=deadline)
-                    added += self._add_found(n, found, restrictions, prices[n])
+                added = self._heuristic_round(prices, restrictions, deadline)
+            least: list[float] | None = None  # per AAV: a lower bound on its least rc
+            if added == 0 and self.ng_size:
+                least, added = self._price_round(prices, restrictions, range(n_aavs),
+                                                 deadline, relaxed=True)
+                bound = max(bound, value + sum(min(0.0, v) for v in least))
             exact = added == 0
             if exact:
-                least_total = 0.0
-                for n, pricer in enumerate(self.pricers):
-                    least, found = pricer.price(prices[n], restrictions[n],
-                                                limit=self.columns_per_aav, deadline=deadline)
-                    least_total += min(0.0, least)  # -inf where cut short at the deadline
-                    added += self._add_found(n, found, restrictions, prices[n])
+                unsure = [n for n in range(n_aavs) if least is None or least[n] < -tolerance]
+                found, added = self._price_round(prices, restrictions, unsure, deadline)
+                known = list(least) if least is not None else [-math.inf] * n_aavs
+                for n, v in zip(unsure, found, strict=True):
+                    known[n] = max(known[n], v)  # -inf where cut short at the deadline
+                least_total = sum(min(0.0, v) for v in known)
                 bound = max(bound, value + least_total)
             clock["pricing"] += time.perf_counter() - began
             # Columns added after this LP have lambda = 0 in its solution.
             x = np.concatenate([x, np.zeros(self.n_cols - len(x))])
-            if exact and least_total == -math.inf:  # a cut-short pricing proves nothing
+            if exact and -math.inf in found:  # a cut-short pricing settles nothing
                 return value, bound, x, False
             if exact and added == 0:
                 # Nothing new prices out: the LP value is the node's bound, unless the
                 # schedules of negative reduced cost were already columns (float noise
                 # between the labelling and HiGHS), where only the Lagrangian bound is sure.
-                settled = least_total >= -RC_TOLERANCE * max(1.0, abs(value))
+                settled = least_total >= -tolerance
                 return value, max(bound, value) if settled else bound, x, True
             if bound >= cutoff - PRUNE_TOLERANCE * max(1.0, abs(cutoff)):
                 return value, bound, x, False
             if time.perf_counter() >= deadline:
                 return value, bound, x, False
+
+    def _heuristic_round(self, prices: list[TaskPrices], restrictions: list[Restrictions],
+                         deadline: float) -> int:
+        """Heuristic pricing of the AAVs in turn, from where the last round stopped, until
+        ``heuristic_round_columns`` columns are added (0: every AAV): with many AAVs the
+        LP is cheap beside a pricing call, and fresh duals after a few AAVs steer the next
+        ones better than the duals all of them were priced at. Columns added."""
+        n_aavs = self.instance.n_aavs
+        added = 0
+        for step in range(n_aavs):
+            n = (self._heuristic_next + step) % n_aavs
+            added += self._price_round(prices, restrictions, [n], deadline,
+                                       label_cap=self.heuristic_cap)[1]
+            if self.heuristic_round_columns and added >= self.heuristic_round_columns:
+                self._heuristic_next = n + 1
+                break
+        return added
+
+    def _price_round(self, prices: list[TaskPrices], restrictions: list[Restrictions],
+                     aavs: Sequence[int], deadline: float, *, label_cap: int | None = None,
+                     relaxed: bool = False) -> tuple[list[float], int]:
+        """Each of ``aavs`` priced once, its schedules added: (least reduced cost per AAV
+        in ``aavs``, columns added)."""
+        least, added = [], 0
+        for n in aavs:
+            v, found = self.pricers[n].price(prices[n], restrictions[n],
+                                             limit=self.columns_per_aav, label_cap=label_cap,
+                                             relaxed=relaxed, deadline=deadline)
+            least.append(v)
+            added += self._add_found(n, found, restrictions, prices[n])
+        return least, added
 
     def _add_found(self, n: int, found: list, restrictions: list[Restrictions],
                    prices: TaskPrices) -> int:
@@ -609,6 +681,7 @@ class BranchPrice:
 
         value = self.h.getInfo().objective_function_value
         saved = self.basis()
+        self.h.setOptionValue("simplex_strategy", DUAL_SIMPLEX)  # bound changes only
         best, best_score = candidates[0], -math.inf
         for k, m in candidates:
             visiting = {c.index for c in self.visiting.get((k, m), ())}

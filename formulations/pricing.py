@@ -28,6 +28,10 @@ node when every completion of L2 is a completion of L1 at no higher reduced cost
   task, which no path beats (distances obey the triangle inequality, and waiting for a
   window only adds time), shortened by a relative 1e-9 so that the test stays on the safe
   side of the float sums of the real legs.
+The ng relaxation (``Pricer.price(relaxed=True)``) keeps, in place of the visited set, the
+label's memory: of the tasks visited, those in the neighbourhood of the label's task (and the
+committed ones); a task out of memory may be visited again. Its least reduced cost is over a
+superset of the schedules, so a lower bound on the exact least.
 Arrival and Dcum are accumulated leg by leg in the evaluator's order of float operations, so
 a schedule's arrivals (hence its time-window feasibility and price) are the evaluator's to
 the last bit. The labelling runs compiled (numba): pricing is nearly all of the search's
@@ -127,7 +131,7 @@ class Pricer:
     """
 
     def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: Anchor,
-                 timed: frozenset[int]) -> None:
+                 timed: frozenset[int], ng_size: int = 8) -> None:
         self.instance = instance
         self.n = n
         self.network = network
@@ -191,19 +195,32 @@ class Pricer:
         self._reach = np.ascontiguousarray(
             instance.dist[:n_tasks, :n_tasks] / self.speed * (1.0 - 1e-9))
         words = max(1, (n_tasks + 63) // 64)
-        self._anchor_visited = np.array(
-            [_signed_word((anchor.visited >> (64 * w)) & (2**64 - 1)) for w in range(words)],
-            np.int64)
+        self._anchor_visited = _bit_words(anchor.visited, words)
+        # What a label remembers of its visited tasks on arriving at j: everything (exact), or
+        # the ng relaxation's neighbourhood of j, the ng_size tasks nearest to j (j itself
+        # first), and the committed tasks, which no schedule may visit again.
+        self._full_memory = np.full((n_tasks, words), -1, np.int64)
+        self._ng_memory = self._full_memory.copy()
+        on_network = sorted(network.tasks)
+        for j in on_network:
+            nearest = sorted(on_network, key=lambda i: (i != j, instance.dist[j, i], i))
+            neighbourhood = anchor.visited
+            for i in nearest[:ng_size]:
+                neighbourhood |= 1 << i
+            self._ng_memory[j] = _bit_words(neighbourhood, words)
 
     def _node(self, node: int) -> int:
         return self._start_node if node == START else node
 
     def price(self, prices: TaskPrices, restrictions: Restrictions, *, limit: int = 50,
-              label_cap: int | None = None, deadline: float = math.inf
-              ) -> tuple[float, list[Schedule]]:
+              label_cap: int | None = None, relaxed: bool = False,
+              deadline: float = math.inf) -> tuple[float, list[Schedule]]:
         """(least reduced cost, up to ``limit`` schedules of negative reduced cost, least
         first). With ``label_cap`` only the cheapest labels per node and length are kept: a
-        heuristic whose least reduced cost is then not a bound. Past ``deadline``
+        heuristic whose least reduced cost is then not a bound. ``relaxed``: the ng
+        relaxation, which may also visit a task again once it has left the task's
+        neighbourhood; its least is over more paths, so a lower bound on the exact least,
+        and only its elementary schedules are returned. Past ``deadline``
         (time.perf_counter) the labelling stops: the schedules found so far are returned
         and the least reduced cost is -inf (nothing is known of it)."""
         n_tasks, size = self.instance.n_tasks, self.capacity + 1
@@ -243,7 +260,8 @@ class Pricer:
             per_task(prices.visit_bonus),
             per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
             theta_low, theta_high, np.array(sorted(restrictions.arrival_low), np.int64),
-            self._reach, 0 if label_cap is None else label_cap, deadline)
+            self._reach, self._ng_memory if relaxed else self._full_memory, not relaxed,
+            0 if label_cap is None else label_cap, deadline)
         cost, alive, finished = labels[0], labels[1], labels[9]
         least = float(cost.min()) if finished else -math.inf
         chosen, seen = [], set()
@@ -251,6 +269,8 @@ class Pricer:
             if cost[k] >= -1e-9 or len(chosen) >= limit:
                 break
             tail = self._tail(int(k), labels)
+            if relaxed and not _elementary(tail):
+                continue
             if tail not in seen:
                 seen.add(tail)
                 chosen.append(Schedule(tail, float(cost[k])))
@@ -295,9 +315,16 @@ class Pricer:
         return tuple(visits)
 
 
-def _signed_word(word: int) -> int:
-    """An unsigned 64-bit word as the int64 with the same bits (the kernel's bit sets)."""
-    return word - 2**64 if word >= 2**63 else word
+def _elementary(tail: Sequence[Visit]) -> bool:
+    """No task twice (depots may repeat)."""
+    tasks = [v.node for v in tail if v.amount]
+    return len(tasks) == len(set(tasks))
+
+
+def _bit_words(bits: int, words: int) -> np.ndarray:
+    """A set of tasks (bit i = task i) as the kernel's int64 words, 64 tasks each."""
+    out = [(bits >> (64 * w)) & (2**64 - 1) for w in range(words)]
+    return np.array([w - 2**64 if w >= 2**63 else w for w in out], np.int64)
 
 
 # --- the compiled labelling ---------------------------------------------------------------
@@ -376,9 +403,10 @@ def _first_visit_table(dst, least, delivery, price, low, high):
 
 @njit(cache=True)
 def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone,
-               floored, theta_low, t_start, t_end, horizon, reach):
+               floored, theta_low, t_start, t_end, horizon, reach, elementary):
     """The rule of the module docstring; the cheap scalar tests go first (the table test
-    needs cost_a <= cost_b, its cell (B, B))."""
+    needs cost_a <= cost_b, its cell (B, B)). Without ``elementary`` (the ng relaxation)
+    a task in b's memory is not out of b's reach: b may come back once it forgets it."""
     if clock[a] > clock[b] or cost[a] > cost[b] or (loaded[b] and not loaded[a]):
         return False
     for w in range(visited.shape[1]):
@@ -390,7 +418,8 @@ def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcu
     # a is already late enough. reach[m] is the straight leg's time from a's and b's task.
     if clock[a] < clock[b]:
         for m in floored:
-            if (visited[b, m >> 6] >> (m & 63)) & 1 or clock[b] + reach[m] > t_end[m]:
+            if (elementary and (visited[b, m >> 6] >> (m & 63)) & 1) or \
+                    clock[b] + reach[m] > t_end[m]:
                 continue
             earliest = max(t_start[m], clock[a] + reach[m])
             if (earliest - t_start[m]) / horizon <= theta_low[m]:
@@ -419,7 +448,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                cover, aav_time, closer, closer_time, goods_time, visit_bonus, cut_bonus,
                arc_bonus,
                forbidden_task, forbidden_arc, amount_low, amount_high, theta_low,
-               theta_high, floored, reach, label_cap, deadline):
+               theta_high, floored, reach, ng_memory, elementary, label_cap, deadline):
     """Every undominated label from the anchor, extended path length by path length (with
     ``label_cap`` > 0 only the cheapest that many per node and length go on).
 
@@ -539,7 +568,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                 low_of[k], high_of[k] = a_low, a_high
                 clock[k], flown[k], cost[k] = t, f, tables[k, size - 1, size - 1]
                 alive[k], loaded[k] = True, has_goods
-                visited[k] = visited[lab]
+                visited[k] = visited[lab] & ng_memory[j]
                 visited[k, j >> 6] |= np.int64(1) << (j & 63)
                 # Dominance within the bucket of node j; its labels' clocks, costs and
                 # (first words of) visited sets are kept side by side so that the scan
@@ -554,7 +583,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                         if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
                                                        flown, tables, max_range,
                                                        dcum_monotone, floored, theta_low,
-                                                       t_start, t_end, horizon, reach[j]):
+                                                       t_start, t_end, horizon, reach[j],
+                                                       elementary):
                             rejected = True
                             break
                 if rejected:
@@ -568,7 +598,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                             tasks & ~bucket_tasks[j, i] == 0 and \
                             _dominates(k, other, clock, cost, loaded, visited, flown, tables,
                                        max_range, dcum_monotone, floored, theta_low,
-                                       t_start, t_end, horizon, reach[j]):
+                                       t_start, t_end, horizon, reach[j], elementary):
                         alive[other] = False
                         continue
                     bucket[j, kept] = other

@@ -174,6 +174,9 @@ class BranchPriceAllocator(Settings):
         strong_candidates=Interval(int, 1, None),
         time_branching=Boolean(),
         goods_time_rows=Boolean(),
+        ng_size=NoneOr(Interval(int, 0, None)),
+        primal_resolves=NoneOr(Boolean()),
+        heuristic_round_columns=Interval(int, 0, None),
         threads=Interval(int, 1, None),
     )
 
@@ -181,7 +184,9 @@ class BranchPriceAllocator(Settings):
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
                  closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
                  strong_candidates: int = 4, time_branching: bool = True,
-                 goods_time_rows: bool = True, threads: int = 1) -> None:
+                 goods_time_rows: bool = True, ng_size: int | None = None,
+                 primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
+                 threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
         self.threads = threads
@@ -193,6 +198,9 @@ class BranchPriceAllocator(Settings):
         self.strong_candidates = strong_candidates
         self.time_branching = time_branching
         self.goods_time_rows = goods_time_rows
+        self.ng_size = ng_size
+        self.primal_resolves = primal_resolves
+        self.heuristic_round_columns = heuristic_round_columns
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -219,7 +227,11 @@ class BranchPriceAllocator(Settings):
                                  symmetry=self.symmetry,
                                  strong_candidates=self.strong_candidates,
                                  time_branching=self.time_branching,
-                                 goods_time_rows=self.goods_time_rows, threads=self.threads)
+                                 goods_time_rows=self.goods_time_rows,
+                                 ng_size=self.ng_size,
+                                 primal_resolves=self.primal_resolves,
+                                 heuristic_round_columns=self.heuristic_round_columns,
+                                 threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

@@ -43,7 +43,10 @@ def solve_bp(instance, state=None, **settings):
 def test_exact_bp_equals_brute_force(seed: int) -> None:
     instance = tiny_instance(seed, n_aavs=2, n_tasks=3, max_demand=4 + seed % 3)
     J_brute, _ = brute_force(instance)
-    result = solve_bp(instance)
+    # The default ng neighbourhoods hold all 3 tasks (the relaxation is exact); with one
+    # task each (odd seeds) the relaxed pricing admits returns to a task, and the exact
+    # labelling must settle what it cannot.
+    result = solve_bp(instance, ng_size=1 if seed % 2 else 8)
     assert result.stats["status"] == "optimal"
     assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
     assert result.stats["lower_bound"] <= J_brute + 1e-9
@@ -184,6 +187,42 @@ def test_a_pricing_call_stops_at_the_deadline_and_then_claims_no_bound() -> None
     assert cut == -math.inf
 
 
+def _ng_pricing_checks(seed: int) -> int:
+    """The relaxation's least is over a superset of the schedules (returns to a task once
+    it has left the task's neighbourhood), so it may be lower, never higher; with every task
+    in every neighbourhood it is the exact labelling itself; what it returns are schedules,
+    priced as the evaluator prices them. Returns how often it was strictly lower."""
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
+    narrow, wide = BranchPrice(instance, ng_size=1), BranchPrice(instance, ng_size=4)
+    rng = random.Random(seed)
+    strictly_lower = 0
+    for n in range(instance.n_aavs):
+        for _ in range(4):
+            prices = _random_prices(narrow, n, rng)
+            conv = -prices.base
+            prices.base = narrow.reduced_cost(narrow.make_column(n, ()), prices) - conv
+            windows = _arrival_windows(narrow, n, rng)
+            exact, _ = narrow.pricers[n].price(prices, windows)
+            relaxed, found = narrow.pricers[n].price(prices, windows, relaxed=True)
+            assert relaxed <= exact + 1e-12
+            strictly_lower += relaxed < exact - 1e-9
+            assert wide.pricers[n].price(prices, windows, relaxed=True)[0] == exact
+            for schedule in found:
+                tasks = [v.node for v in schedule.tail if not instance.is_depot(v.node)]
+                assert len(tasks) == len(set(tasks))
+                column = narrow.make_column(n, schedule.tail)
+                assert _compatible(column, windows)
+                assert schedule.reduced_cost == pytest.approx(
+                    narrow.reduced_cost(column, prices) - conv, abs=1e-9)
+    return strictly_lower
+
+
+def test_ng_pricing_bounds_the_exact_least_and_returns_only_schedules() -> None:
+    # Strictly lower somewhere, or the checks could not tell the relaxation from the exact
+    # labelling.
+    assert sum(_ng_pricing_checks(seed) for seed in range(8)) >= 20
+
+
 @pytest.mark.parametrize("seed", [4, 7])
 def test_arrival_window_branching_keeps_the_brute_force_optimum(seed: int) -> None:
     # Instances of test_exact_bp_equals_brute_force whose trees branch on arrival windows.
@@ -208,8 +247,9 @@ def test_pricing_finds_the_least_reduced_cost_of_all_schedules(seed: int) -> Non
 def test_the_bound_never_exceeds_any_plan(seed: int) -> None:
     instance = tiny_instance(50 + seed, n_aavs=3, n_tasks=5, max_demand=6)
     evaluator = CostEvaluator(instance)
-    # A short limit leaves the search open: its bound must still be a bound.
-    result = solve_bp(instance, time_limit=1.0)
+    # A short limit leaves the search open: its bound must still be a bound, with the ng
+    # relaxation's bounds (neighbourhoods of 1 task: odd seeds) or the exact ones.
+    result = solve_bp(instance, time_limit=1.0, ng_size=1 if seed % 2 else 8)
     bound = result.stats["lower_bound"]
     assert bound is not None and result.stats["root_bound"] is not None
     assert bound <= result.stats["J"] + 1e-9
@@ -374,3 +414,24 @@ def test_goods_time_rows_lift_the_root_and_stay_below_the_optimum(
     assert 100 * plain["lp"] / J_star == pytest.approx(without, abs=0.05)
     assert 100 * lifted["lp"] / J_star == pytest.approx(with_rows, abs=0.05)
     assert lifted["lp"] <= J_star + 1e-6 * J_star
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_root_lp_is_the_same_with_and_without_the_ng_relaxation(seed: int) -> None:
+    # Where the relaxation's least is negative but none of its schedules is elementary, the
+    # exact labelling must still run: a column it would find changes the LP.
+    instance = tiny_instance(300 + seed, n_aavs=2, n_tasks=5, max_demand=4)
+    exact = BranchPrice(instance, ng_size=0).root()
+    relaxed = BranchPrice(instance, ng_size=1).root()
+    assert exact["converged"] and relaxed["converged"]
+    assert relaxed["lp"] == pytest.approx(exact["lp"], rel=1e-9, abs=1e-9)
+
+
+def test_the_large_instance_measures_switch_on_from_30_tasks() -> None:
+    from tsac_bench.model.generator import generate
+
+    small, large = BranchPrice(generate("4/10", 1)), BranchPrice(generate("16/40", 1))
+    assert (small.ng_size, small.primal_resolves) == (0, False)
+    assert (large.ng_size, large.primal_resolves) == (8, True)
+    chosen = BranchPrice(generate("4/10", 1), ng_size=3, primal_resolves=True)
+    assert (chosen.ng_size, chosen.primal_resolves) == (3, True)

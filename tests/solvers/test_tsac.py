@@ -390,6 +390,22 @@ def test_policy_files_name_their_feature_set(tmp_path):
     assert runs[0].evaluation.feasible and runs[0].claim_matches
 
 
+@pytest.mark.parametrize(("settings", "weights"), [
+    # From clone_weight 2 after the 1 000 warm-up decisions to the floor at clone_until.
+    ({}, [2.0, 1.0, 0.0, 0.0]),
+    ({"clone_floor": 0.5}, [2.0, 1.25, 0.5, 0.5]),
+    ({"clone_floor": 1.0, "clone_until": 0.5}, [2.0, 1.0, 1.0, 1.0]),
+    ({"clone_floor": 2.0}, [2.0, 2.0, 2.0, 2.0]),
+    # The td signal keeps its weight constant; a schedule ending by the warm-up: the floor.
+    ({"clone_floor": 0.5, "signal": "td"}, [2.0, 2.0, 2.0, 2.0]),
+    ({"clone_floor": 0.5, "clone_until": 0.1}, [0.5, 0.5, 0.5, 0.5]),
+])
+def test_the_cloning_weight_falls_from_clone_weight_to_clone_floor(settings, weights):
+    config = TrainConfig(steps=8000, warmup=1000, **settings)
+    # The warm-up's end, half-way to clone_until=1, clone_until=1, after the last step.
+    assert [config.clone_weight_at(s) for s in (1000, 4500, 8000, 9000)] == weights
+
+
 def test_rollout_training_writes_a_feature_set_2_policy_and_resumes(tmp_path):
     config = TrainConfig(steps=50, warmup=20, pretrain_updates=3, eval_every=50,
                          eval_scale="4/10", eval_instances=1, checkpoint_every=25,

@@ -38,12 +38,14 @@ def train(*args):
 def test_set_fields_reach_the_training_configuration(tmp_path, trained):
     result = train("--out", tmp_path, "--steps", 4000, "--seed", 3,
                    "--set", "signal=td", "--set", "replan_share=0", "--set", "features=1",
-                   "--set", "demonstrator=none", "--set", " clone_until = 0.5")
+                   "--set", "demonstrator=none", "--set", " clone_until = 0.5",
+                   "--set", "clone_floor=1")
     assert result.exit_code == 0, result.output
     [(out, config, _)] = trained
     assert out == tmp_path
     assert (config.steps, config.seed, config.signal, config.replan_share, config.features,
-            config.demonstrator, config.clone_until) == (4000, 3, "td", 0.0, 1, None, 0.5)
+            config.demonstrator, config.clone_until, config.clone_floor) == (
+                4000, 3, "td", 0.0, 1, None, 0.5, 1.0)
     assert type(config.replan_share) is float and type(config.features) is int
     # The network is built for the feature set given: version 1 has no pass action.
     assert (config.net.features, config.net.task_dim, config.net.pass_action) == (1, 20, False)
@@ -69,6 +71,7 @@ def test_without_set_the_configuration_is_the_default(tmp_path, trained):
     ("warmup=ten", ["--set", "'warmup'", "'ten'"]),
     ("demonstrator=dga", ["--set", "'demonstrator'", "'hocf', 'rocf'"]),
     ("label_scale=0", ["--set", "'label_scale'", "> 0"]),
+    ("clone_floor=2.5", ["--set", "'clone_floor'", "2.5", "[0, clone_weight=2.0]"]),
     ("signal", ["--set", "'signal'", "expected KEY=VALUE"]),
 ])
 def test_a_bad_set_is_one_line_naming_the_option_and_field(tmp_path, trained, pair, words):
@@ -77,6 +80,15 @@ def test_a_bad_set_is_one_line_naming_the_option_and_field(tmp_path, trained, pa
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: --set"), result.output
     assert all(w in lines[0] for w in words), lines[0]
+    assert trained == []
+
+
+def test_clone_floor_may_not_exceed_a_given_clone_weight(tmp_path, trained):
+    result = train("--out", tmp_path, "--set", "clone_weight=0.5", "--set", "clone_floor=1")
+    assert result.exit_code == 2
+    assert result.output.strip() == (
+        "error: --set: method 'TrainConfig' setting 'clone_floor': got '1'; "
+        "allowed: a number in [0, clone_weight=0.5]")
     assert trained == []
 
 

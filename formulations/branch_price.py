@@ -529,16 +529,16 @@ class BranchPrice:
             exact = added == 0
             if exact:
                 unsure = [n for n in range(n_aavs) if least is None or least[n] < -tolerance]
-                found, added = self._price_round(prices, restrictions, unsure, deadline)
+                exact_least, added = self._price_round(prices, restrictions, unsure, deadline)
                 known = list(least) if least is not None else [-math.inf] * n_aavs
-                for n, v in zip(unsure, found, strict=True):
+                for n, v in zip(unsure, exact_least, strict=True):
                     known[n] = max(known[n], v)  # -inf where cut short at the deadline
                 least_total = sum(min(0.0, v) for v in known)
                 bound = max(bound, value + least_total)
             clock["pricing"] += time.perf_counter() - began
             # Columns added after this LP have lambda = 0 in its solution.
             x = np.concatenate([x, np.zeros(self.n_cols - len(x))])
-            if exact and -math.inf in found:  # a cut-short pricing settles nothing
+            if exact and -math.inf in exact_least:  # a cut-short pricing settles nothing
                 return value, bound, x, False
             if exact and added == 0:
                 # Nothing new prices out: the LP value is the node's bound, unless the

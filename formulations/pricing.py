@@ -131,7 +131,7 @@ class Pricer:
     """
 
     def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: Anchor,
-                 timed: frozenset[int], ng_size: int = 8) -> None:
+                 timed: frozenset[int], ng_size: int) -> None:
         self.instance = instance
         self.n = n
         self.network = network
@@ -269,12 +269,17 @@ class Pricer:
             if cost[k] >= -1e-9 or len(chosen) >= limit:
                 break
             tail = self._tail(int(k), labels)
-            if relaxed and not _elementary(tail):
+            if relaxed and not self._elementary(tail):
                 continue
             if tail not in seen:
                 seen.add(tail)
                 chosen.append(Schedule(tail, float(cost[k])))
         return least, chosen
+
+    def _elementary(self, tail: Sequence[Visit]) -> bool:
+        """No task twice (depots may repeat)."""
+        tasks = [v.node for v in tail if not self.instance.is_depot(v.node)]
+        return len(tasks) == len(set(tasks))
 
     def _tail(self, label: int, labels: tuple) -> tuple[Visit, ...]:
         """The free visits of a finished label, amounts read back from the cell (B, B): at
@@ -313,12 +318,6 @@ class Pricer:
                 visits.append(Visit(mode))
             visits.append(Visit(int(node[lab]), a))
         return tuple(visits)
-
-
-def _elementary(tail: Sequence[Visit]) -> bool:
-    """No task twice (depots may repeat)."""
-    tasks = [v.node for v in tail if v.amount]
-    return len(tasks) == len(set(tasks))
 
 
 def _bit_words(bits: int, words: int) -> np.ndarray:

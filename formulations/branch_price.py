@@ -87,6 +87,10 @@ DUAL_SIMPLEX, PRIMAL_SIMPLEX = 1, 4
 #: (seed 4: 120 s -> 153 s).
 LARGE_FROM_TASKS = 30
 NG_SIZE = 8
+#: A relaxed pricing call whose negative paths all have cycles grows the neighbourhoods by
+#: them and runs again, at most this many times (Pricer.price, ``growth_rounds``), before
+#: the exact labelling is asked.
+NG_GROWTH_ROUNDS = 5
 
 Arc3 = tuple[int, int, int]
 
@@ -133,6 +137,7 @@ class BranchPrice:
                  cover_cuts: bool = True, symmetry: bool = True, threads: int = 1,
                  strong_candidates: int = 4, time_branching: bool = True,
                  goods_time_rows: bool = True, ng_size: int | None = None,
+                 ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None,
                  heuristic_round_columns: int = 120) -> None:
         import highspy
@@ -160,6 +165,8 @@ class BranchPrice:
         # None: the large-instance measures from LARGE_FROM_TASKS tasks up (docs).
         large = len(self.tasks) >= LARGE_FROM_TASKS
         self.ng_size = ng_size if ng_size is not None else (NG_SIZE if large else 0)
+        self.ng_growth_rounds = (NG_GROWTH_ROUNDS if ng_growth_rounds is None
+                                 else ng_growth_rounds)
         self.primal_resolves = primal_resolves if primal_resolves is not None else large
         self.heuristic_round_columns = heuristic_round_columns
         self._heuristic_next = 0  # the AAV the next heuristic round starts with
@@ -577,7 +584,9 @@ class BranchPrice:
         for n in aavs:
             v, found = self.pricers[n].price(prices[n], restrictions[n],
                                              limit=self.columns_per_aav, label_cap=label_cap,
-                                             relaxed=relaxed, deadline=deadline)
+                                             relaxed=relaxed,
+                                             growth_rounds=self.ng_growth_rounds,
+                                             deadline=deadline)
             least.append(v)
             added += self._add_found(n, found, restrictions, prices[n])
         return least, added

@@ -214,15 +214,21 @@ class Pricer:
 
     def price(self, prices: TaskPrices, restrictions: Restrictions, *, limit: int = 50,
               label_cap: int | None = None, relaxed: bool = False,
+              growth_rounds: int = 0,
               deadline: float = math.inf) -> tuple[float, list[Schedule]]:
         """(least reduced cost, up to ``limit`` schedules of negative reduced cost, least
         first). With ``label_cap`` only the cheapest labels per node and length are kept: a
         heuristic whose least reduced cost is then not a bound. ``relaxed``: the ng
         relaxation, which may also visit a task again once it has left the task's
         neighbourhood; its least is over more paths, so a lower bound on the exact least,
-        and only its elementary schedules are returned. Past ``deadline``
-        (time.perf_counter) the labelling stops: the schedules found so far are returned
-        and the least reduced cost is -inf (nothing is known of it)."""
+        and only its elementary schedules are returned. When its negative paths are all
+        non-elementary, the neighbourhoods grow by their cycles (``grow_memory``) and the
+        relaxation runs again, up to ``growth_rounds`` times: each run's least is a lower
+        bound, the largest is returned, and once the best path is elementary it is the
+        exact least without the exact labelling. Past ``deadline`` (time.perf_counter) the
+        labelling stops: the schedules found so far are returned and the least reduced
+        cost is -inf (nothing is known of it), or in a later relaxed run the earlier
+        run's least."""
         n_tasks, size = self.instance.n_tasks, self.capacity + 1
 
         def per_task(values: dict[int, float], fill: float = 0.0, dtype=float) -> np.ndarray:
@@ -247,6 +253,29 @@ class Pricer:
         theta_high = per_task(restrictions.arrival_high, np.inf)
         root = np.full((size, size), np.inf)
         root[self.anchor.peak:, self.anchor.pickup:] = prices.base
+        arrays = (
+            per_task(prices.cover), per_task(prices.aav_time), per_task(prices.closer),
+            per_task(prices.closer_time), per_task(prices.goods_time),
+            per_task(prices.visit_bonus),
+            per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
+            theta_low, theta_high, np.array(sorted(restrictions.arrival_low), np.int64))
+        best = -math.inf
+        chosen: list[Schedule] = []
+        for _ in range(1 + (growth_rounds if relaxed else 0)):
+            least, found, cycles = self._run(root, arrays, limit, label_cap, relaxed,
+                                             deadline)
+            if least == -math.inf:  # cut short: the earlier run's least stands
+                return best, chosen or found
+            best, chosen = max(best, least), found
+            if found or least >= -1e-9 or not self.grow_memory(cycles):
+                break
+        return best, chosen
+
+    def _run(self, root: np.ndarray, arrays: tuple, limit: int, label_cap: int | None,
+             relaxed: bool, deadline: float
+             ) -> tuple[float, list[Schedule], list[tuple[Visit, ...]]]:
+        """One labelling: (least reduced cost, schedules, and in the relaxation the
+        non-elementary paths of negative reduced cost among the first ``limit``)."""
         anchor = self.anchor
         labels = _labelling(
             self._out_first, self._arc_head, self._arc_leg1, self._arc_leg2, self._arc_depot,
@@ -254,27 +283,46 @@ class Pricer:
             self.speed, self.capacity, self.max_range, self.per_metre, self.full,
             self.dcum_monotone, self.horizon,
             self._node(anchor.node), anchor.clock, anchor.flown, self._anchor_visited,
-            anchor.loaded, root,
-            per_task(prices.cover), per_task(prices.aav_time), per_task(prices.closer),
-            per_task(prices.closer_time), per_task(prices.goods_time),
-            per_task(prices.visit_bonus),
-            per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
-            theta_low, theta_high, np.array(sorted(restrictions.arrival_low), np.int64),
-            self._reach, self._ng_memory if relaxed else self._full_memory, not relaxed,
+            anchor.loaded, root, *arrays, self._reach,
+            self._ng_memory if relaxed else self._full_memory, not relaxed,
             0 if label_cap is None else label_cap, deadline)
         cost, alive, finished = labels[0], labels[1], labels[9]
         least = float(cost.min()) if finished else -math.inf
-        chosen, seen = [], set()
+        chosen, seen, cycles = [], set(), []
         for k in np.flatnonzero(alive)[np.argsort(cost[alive], kind="stable")]:
             if cost[k] >= -1e-9 or len(chosen) >= limit:
                 break
             tail = self._tail(int(k), labels)
             if relaxed and not self._elementary(tail):
+                if len(cycles) < limit:
+                    cycles.append(tail)
                 continue
             if tail not in seen:
                 seen.add(tail)
                 chosen.append(Schedule(tail, float(cost[k])))
-        return least, chosen
+        return least, chosen, cycles
+
+    def grow_memory(self, paths: Sequence[Sequence[Visit]]) -> bool:
+        """Forbid the cycles of ``paths`` in the ng relaxation (Roberti and Mingozzi's
+        dynamic ng-path relaxation): where task i is visited twice, i joins the
+        neighbourhood of every task visited in between, so that a label remembers i until
+        it could come back. Neighbourhoods only grow, so every later relaxation is still
+        one (of a smaller superset of the schedules). Whether anything was added."""
+        grown = False
+        for path in paths:
+            tasks = [v.node for v in path if not self.instance.is_depot(v.node)]
+            last_seen: dict[int, int] = {}
+            for q, i in enumerate(tasks):
+                p = last_seen.get(i)
+                last_seen[i] = q
+                if p is None:
+                    continue
+                word, bit = i >> 6, np.int64(1) << (i & 63)
+                for v in tasks[p + 1:q]:
+                    if not self._ng_memory[v, word] & bit:
+                        self._ng_memory[v, word] |= bit
+                        grown = True
+        return grown
 
     def _elementary(self, tail: Sequence[Visit]) -> bool:
         """No task twice (depots may repeat)."""

@@ -175,6 +175,7 @@ class BranchPriceAllocator(Settings):
         time_branching=Boolean(),
         goods_time_rows=Boolean(),
         ng_size=NoneOr(Interval(int, 0, None)),
+        ng_growth_rounds=NoneOr(Interval(int, 0, None)),
         primal_resolves=NoneOr(Boolean()),
         heuristic_round_columns=Interval(int, 0, None),
         threads=Interval(int, 1, None),
@@ -185,6 +186,7 @@ class BranchPriceAllocator(Settings):
                  closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
                  strong_candidates: int = 4, time_branching: bool = True,
                  goods_time_rows: bool = True, ng_size: int | None = None,
+                 ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
                  threads: int = 1) -> None:
         self.time_limit = time_limit
@@ -199,6 +201,7 @@ class BranchPriceAllocator(Settings):
         self.time_branching = time_branching
         self.goods_time_rows = goods_time_rows
         self.ng_size = ng_size
+        self.ng_growth_rounds = ng_growth_rounds
         self.primal_resolves = primal_resolves
         self.heuristic_round_columns = heuristic_round_columns
 
@@ -229,6 +232,7 @@ class BranchPriceAllocator(Settings):
                                  time_branching=self.time_branching,
                                  goods_time_rows=self.goods_time_rows,
                                  ng_size=self.ng_size,
+                                 ng_growth_rounds=self.ng_growth_rounds,
                                  primal_resolves=self.primal_resolves,
                                  heuristic_round_columns=self.heuristic_round_columns,
                                  threads=self.threads)

@@ -3,6 +3,7 @@ the proven regression optima, full enumeration of schedules, and the MILP in dyn
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import random
@@ -15,6 +16,7 @@ from tiny import tiny_instance
 
 from tsac_bench.formulations.branch_price import BranchPrice, _compatible
 from tsac_bench.formulations.pricing import Restrictions, TaskPrices, all_schedules
+from tsac_bench.model import Visit
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.io import read_instance
 from tsac_bench.planning import PlanningState, make_allocator
@@ -221,6 +223,57 @@ def test_ng_pricing_bounds_the_exact_least_and_returns_only_schedules() -> None:
     # Strictly lower somewhere, or the checks could not tell the relaxation from the exact
     # labelling.
     assert sum(_ng_pricing_checks(seed) for seed in range(8)) >= 20
+
+
+def test_growing_the_neighbourhoods_forbids_exactly_the_cycle() -> None:
+    instance = tiny_instance(0, n_aavs=2, n_tasks=4, max_demand=3)
+    pricer = BranchPrice(instance, ng_size=1).pricers[0]
+    before = pricer._ng_memory.copy()
+    depot = instance.n_tasks  # the first depot's node
+    # Task 0 visited twice with tasks 2 and 1 (and a depot) in between.
+    path = [Visit(0, 1), Visit(2, 1), Visit(depot), Visit(1, 1), Visit(0, 1)]
+    assert pricer.grow_memory([path])
+    changed = {j for j in range(instance.n_tasks) if (pricer._ng_memory[j] != before[j]).any()}
+    assert changed == {1, 2}
+    assert all(pricer._ng_memory[j, 0] & 1 for j in (1, 2))
+    assert not pricer.grow_memory([path])  # nothing left to add
+
+
+def _ng_growth_checks(seed: int) -> int:
+    """With the neighbourhoods grown until the relaxation returns a schedule or proves
+    none prices out, its least is still a lower bound on the exact least, and it says the
+    same as the exact labelling whether a schedule of negative reduced cost exists.
+    Returns how often the neighbourhoods grew."""
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
+    exact_search, growing = BranchPrice(instance, ng_size=1), BranchPrice(instance, ng_size=1)
+    rng = random.Random(seed)
+    grew = 0
+    for n in range(instance.n_aavs):
+        for _ in range(4):
+            prices = _random_prices(exact_search, n, rng)
+            conv = -prices.base
+            prices.base = exact_search.reduced_cost(exact_search.make_column(n, ()),
+                                                    prices) - conv
+            windows = _arrival_windows(exact_search, n, rng)
+            drawn, _ = exact_search.pricers[n].price(prices, windows)
+            # As drawn, and shifted so that no schedule prices out (a converged LP): there
+            # the relaxation's negative paths are all cycles.
+            for shift in (0.0, 1e-3 - drawn):
+                shifted = dataclasses.replace(prices, base=prices.base + shift)
+                exact = drawn + shift
+                before = growing.pricers[n]._ng_memory.copy()
+                relaxed, found = growing.pricers[n].price(shifted, windows, relaxed=True,
+                                                          growth_rounds=100)
+                grew += bool((growing.pricers[n]._ng_memory != before).any())
+                assert relaxed <= exact + 1e-12
+                assert bool(found) == (exact < -1e-9), (found, relaxed, exact)
+                if not found:
+                    assert relaxed >= -1e-9
+    return grew
+
+
+def test_ng_growth_keeps_a_bound_and_decides_as_the_exact_labelling() -> None:
+    assert sum(_ng_growth_checks(seed) for seed in range(8)) >= 15
 
 
 @pytest.mark.parametrize("seed", [4, 7])

@@ -79,14 +79,17 @@ PRUNE_TOLERANCE = 1e-9
 INTEGRALITY = 1e-6
 #: HiGHS's ``simplex_strategy`` values.
 DUAL_SIMPLEX, PRIMAL_SIMPLEX = 1, 4
-#: From this many tasks up, by default: the ng relaxation before the exact labelling (with
-#: neighbourhoods of NG_SIZE tasks) and primal re-solves after columns are added. At 16/40
-#: they gave the first bound (no exact pricing round finished before); at 4/10 (10 tasks)
-#: the relaxation costs as much per call as the exact labelling (8 of 10 tasks remembered)
-#: and is mostly followed by it, and the primal re-solves' other duals changed the tree
-#: (seed 4: 120 s -> 153 s).
-LARGE_FROM_TASKS = 30
+#: From this many tasks up, by default, the ng relaxation before the exact labelling (with
+#: neighbourhoods of NG_SIZE tasks). At 16/40 it gave the first bound (no exact pricing
+#: round finished before), at 8/20 seed 0 a bound where none was found in 600 s; at 4/10
+#: (10 tasks) it costs as much per call as the exact labelling (8 of 10 tasks remembered)
+#: and is mostly followed by it.
+NG_FROM_TASKS = 20
 NG_SIZE = 8
+#: From this many tasks up, by default, primal simplex re-solves after columns are added
+#: (16/40 root: 0.64 s per re-solve against 1.5 s); at 4/10 their other duals changed the
+#: tree (seed 4: 120 s -> 153 s).
+PRIMAL_FROM_TASKS = 30
 #: A relaxed pricing call whose negative paths all have cycles grows the neighbourhoods by
 #: them and runs again, at most this many times (Pricer.price, ``growth_rounds``), before
 #: the exact labelling is asked.
@@ -162,12 +165,14 @@ class BranchPrice:
         self.closer_rows = closer_rows
         self.strong_candidates = strong_candidates
         self.time_branching = time_branching
-        # None: the large-instance measures from LARGE_FROM_TASKS tasks up (docs).
-        large = len(self.tasks) >= LARGE_FROM_TASKS
-        self.ng_size = ng_size if ng_size is not None else (NG_SIZE if large else 0)
+        # None: the large-instance measures from NG_FROM_TASKS / PRIMAL_FROM_TASKS up (docs).
+        if ng_size is None:
+            ng_size = NG_SIZE if len(self.tasks) >= NG_FROM_TASKS else 0
+        self.ng_size = ng_size
         self.ng_growth_rounds = (NG_GROWTH_ROUNDS if ng_growth_rounds is None
                                  else ng_growth_rounds)
-        self.primal_resolves = primal_resolves if primal_resolves is not None else large
+        self.primal_resolves = (primal_resolves if primal_resolves is not None
+                                else len(self.tasks) >= PRIMAL_FROM_TASKS)
         self.heuristic_round_columns = heuristic_round_columns
         self._heuristic_next = 0  # the AAV the next heuristic round starts with
         w1, w2, w3 = instance.weights

@@ -480,11 +480,14 @@ def test_the_root_lp_is_the_same_with_and_without_the_ng_relaxation(seed: int) -
     assert relaxed["lp"] == pytest.approx(exact["lp"], rel=1e-9, abs=1e-9)
 
 
-def test_the_large_instance_measures_switch_on_from_30_tasks() -> None:
+def test_the_large_instance_measures_switch_on_from_20_and_30_tasks() -> None:
     from tsac_bench.model.generator import generate
 
-    small, large = BranchPrice(generate("4/10", 1)), BranchPrice(generate("16/40", 1))
+    small, middle, large = (BranchPrice(generate(size, 1)) for size in ("4/10", "8/20",
+                                                                          "16/40"))
     assert (small.ng_size, small.primal_resolves) == (0, False)
+    assert (middle.ng_size, middle.primal_resolves) == (8, False)
     assert (large.ng_size, large.primal_resolves) == (8, True)
+    assert large.ng_growth_rounds == 5
     chosen = BranchPrice(generate("4/10", 1), ng_size=3, primal_resolves=True)
     assert (chosen.ng_size, chosen.primal_resolves) == (3, True)

@@ -90,6 +90,12 @@ NG_SIZE = 8
 #: (16/40 root: 0.64 s per re-solve against 1.5 s); at 4/10 their other duals changed the
 #: tree (seed 4: 120 s -> 153 s).
 PRIMAL_FROM_TASKS = 30
+#: The integer master (BranchPrice.integer_master_plan) runs at the root and then whenever
+#: the columns have grown by this factor since its last run, for at most this share of the
+#: time left (and MASTER_MIP_SECONDS without a time limit).
+MASTER_MIP_GROWTH = 1.5
+MASTER_MIP_SHARE = 0.1
+MASTER_MIP_SECONDS = 60.0
 #: A relaxed pricing call whose negative paths all have cycles grows the neighbourhoods by
 #: them and runs again, at most this many times (Pricer.price, ``growth_rounds``), before
 #: the exact labelling is asked.
@@ -142,7 +148,8 @@ class BranchPrice:
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None,
-                 heuristic_round_columns: int = 120) -> None:
+                 heuristic_round_columns: int = 120, dual_smoothing: float = 0.0,
+                 master_mip_nodes: int = 1000) -> None:
         import highspy
 
         self.instance = instance
@@ -174,6 +181,9 @@ class BranchPrice:
         self.primal_resolves = (primal_resolves if primal_resolves is not None
                                 else len(self.tasks) >= PRIMAL_FROM_TASKS)
         self.heuristic_round_columns = heuristic_round_columns
+        self.dual_smoothing = dual_smoothing
+        self.master_mip_nodes = master_mip_nodes
+        self.threads = threads
         self._heuristic_next = 0  # the AAV the next heuristic round starts with
         w1, w2, w3 = instance.weights
         self.constant = (instance.unserved_task_cost * (instance.n_tasks - len(self.tasks))
@@ -522,6 +532,7 @@ class BranchPrice:
         bound = -math.inf
         n_aavs = self.instance.n_aavs
         columns_added = False  # the node's first LP follows bound changes: dual simplex
+        center = None  # the smoothed duals the last heuristic round priced at
         while True:
             began = time.perf_counter()
             value, x, duals = self.solve_lp(primal=columns_added and self.primal_resolves)
@@ -532,7 +543,19 @@ class BranchPrice:
             tolerance = RC_TOLERANCE * max(1.0, abs(value))
             added = 0
             if self.heuristic_cap:
-                added = self._heuristic_round(prices, restrictions, deadline)
+                if center is not None and self.dual_smoothing:
+                    # Wentges / Neame smoothing: the heuristic prices at a point between
+                    # the last one and the LP's duals, which jump between extreme points
+                    # of a degenerate master; if nothing new prices out there, at the
+                    # LP's duals themselves (no column is missed).
+                    center = self.dual_smoothing * center + (1 - self.dual_smoothing) * duals
+                    added = self._heuristic_round([self.prices(n, center)
+                                                   for n in range(n_aavs)],
+                                                  restrictions, deadline)
+                else:
+                    center = duals
+                if added == 0:
+                    added = self._heuristic_round(prices, restrictions, deadline)
             least: list[float] | None = None  # per AAV: a lower bound on its least rc
             if added == 0 and self.ng_size:
                 least, added = self._price_round(prices, restrictions, range(n_aavs),
@@ -613,6 +636,31 @@ class BranchPrice:
         return added
 
     # --- reading plans off the LP --------------------------------------------------------
+    def integer_master_plan(self, cutoff: float, time_limit: float
+                            ) -> tuple[Route, ...] | None:
+        """A plan from the master with lambda integer over every column so far (HiGHS's
+        MIP, at most ``master_mip_nodes`` nodes and ``time_limit`` s, pruning at
+        ``cutoff``): it puts together columns that no single LP solution does, or None.
+        Its objective is at least the J of its plan, and equal with the right closing
+        sets. The live LP is left at the root's bounds (each node sets its own)."""
+        import highspy
+
+        self.apply(())
+        mip = highspy.Highs()
+        mip.setOptionValue("output_flag", False)
+        mip.setOptionValue("threads", self.threads)
+        mip.setOptionValue("mip_max_nodes", self.master_mip_nodes)
+        mip.setOptionValue("time_limit", max(time_limit, 0.01))
+        mip.setOptionValue("objective_bound", cutoff - self.constant)
+        mip.passModel(self.h.getLp())
+        lambdas = np.array([c.index for c in self.columns], np.int32)
+        mip.changeColsIntegrality(len(lambdas), lambdas,
+                                  np.full(len(lambdas), highspy.HighsVarType.kInteger))
+        mip.run()
+        if not mip.getInfo().primal_solution_status:
+            return None
+        return self.rounded_plan(np.asarray(mip.getSolution().col_value))
+
     def rounded_plan(self, x: np.ndarray) -> tuple[Route, ...]:
         """Each AAV's column of largest lambda (a feasible plan)."""
         best: dict[int, tuple[float, Column]] = {}
@@ -735,7 +783,8 @@ class BranchPrice:
               log: Callable[[str], None] | None = None) -> BranchPriceResult:
         began = time.perf_counter()
         deadline = math.inf if time_limit is None else began + time_limit
-        clock = {"lp": 0.0, "pricing": 0.0, "branching": 0.0}
+        clock = {"lp": 0.0, "pricing": 0.0, "branching": 0.0, "master_mip": 0.0}
+        mip_improved = 0
         instance = self.instance
         free = [len(p) for p in self.committed]
         best_routes = canonical_routes(instance, incumbent, free, self.plan_time)
@@ -765,6 +814,7 @@ class BranchPrice:
         def tolerance(J: float) -> float:
             return PRUNE_TOLERANCE * max(1.0, abs(J))
 
+        mip_columns = 0  # the columns at the integer master's last run (0: not yet run)
         while queue:
             bound, _, decisions, basis = heapq.heappop(queue)
             if bound >= best_J - tolerance(best_J):
@@ -773,6 +823,22 @@ class BranchPrice:
                 heapq.heappush(queue, (bound, next(counter), decisions, basis))
                 status, stop_reason = "feasible", "time limit"
                 break
+            if nodes and self.master_mip_nodes and \
+                    len(self.columns) >= MASTER_MIP_GROWTH * mip_columns:
+                # Between nodes: it leaves the LP at the root's bounds.
+                mip_columns = len(self.columns)
+                solving = time.perf_counter()
+                left = deadline - solving
+                plan = self.integer_master_plan(
+                    best_J, MASTER_MIP_SECONDS if left == math.inf else MASTER_MIP_SHARE * left)
+                clock["master_mip"] += time.perf_counter() - solving
+                if plan is not None:
+                    J = self.evaluator.cost(plan)
+                    if best_J - tolerance(best_J) > J:
+                        best_J, best_routes = J, plan
+                        mip_improved += 1
+                if bound >= best_J - tolerance(best_J):
+                    continue
             nodes += 1
             restrictions = self.apply(decisions)
             self.restore_basis(basis)
@@ -835,6 +901,8 @@ class BranchPrice:
             "lp_time": clock["lp"],
             "pricing_time": clock["pricing"],
             "branching_time": clock["branching"],
+            "master_mip_time": clock["master_mip"],
+            "master_mip_improvements": mip_improved,
             "other_time": time.perf_counter() - began - sum(clock.values()),
             "wall_time": time.perf_counter() - began,
         }

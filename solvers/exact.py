@@ -178,6 +178,8 @@ class BranchPriceAllocator(Settings):
         ng_growth_rounds=NoneOr(Interval(int, 0, None)),
         primal_resolves=NoneOr(Boolean()),
         heuristic_round_columns=Interval(int, 0, None),
+        dual_smoothing=Interval(float, 0, 1, closed="left"),
+        master_mip_nodes=Interval(int, 0, None),
         threads=Interval(int, 1, None),
     )
 
@@ -188,6 +190,7 @@ class BranchPriceAllocator(Settings):
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
+                 dual_smoothing: float = 0.0, master_mip_nodes: int = 1000,
                  threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
@@ -204,6 +207,8 @@ class BranchPriceAllocator(Settings):
         self.ng_growth_rounds = ng_growth_rounds
         self.primal_resolves = primal_resolves
         self.heuristic_round_columns = heuristic_round_columns
+        self.dual_smoothing = dual_smoothing
+        self.master_mip_nodes = master_mip_nodes
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -235,6 +240,8 @@ class BranchPriceAllocator(Settings):
                                  ng_growth_rounds=self.ng_growth_rounds,
                                  primal_resolves=self.primal_resolves,
                                  heuristic_round_columns=self.heuristic_round_columns,
+                                 dual_smoothing=self.dual_smoothing,
+                                 master_mip_nodes=self.master_mip_nodes,
                                  threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])

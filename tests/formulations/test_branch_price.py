@@ -276,6 +276,38 @@ def test_ng_growth_keeps_a_bound_and_decides_as_the_exact_labelling() -> None:
     assert sum(_ng_growth_checks(seed) for seed in range(8)) >= 15
 
 
+@pytest.mark.parametrize("seed", [1, 3, 6, 7])  # root LPs with 2-12 such combinations
+def test_the_integer_master_is_no_worse_than_any_combination_of_the_lp_support(
+        seed: int) -> None:
+    # Each combination of one positive-lambda root column per AAV, with its lambda fixed to
+    # 1 and the other columns to 0, is an integer point of the master: the integer master's
+    # plan costs no more than the best of them (its objective is at least its plan's J).
+    import itertools
+
+    import numpy as np
+
+    instance = tiny_instance(400 + seed, n_aavs=2, n_tasks=4, max_demand=5)
+    search = BranchPrice(instance)
+    assert search.root()["converged"]
+    x = np.asarray(search.h.getSolution().col_value)
+    support = [[c for c in search.columns if c.aav == n and x[c.index] > 1e-9]
+               for n in range(instance.n_aavs)]
+    every = np.array([c.index for c in search.columns], np.int32)
+    best_point = math.inf
+    for combo in itertools.product(*support):
+        ones = np.array([c.index for c in combo], np.int32)
+        search.h.changeColsBounds(len(every), every, np.zeros(len(every)),
+                                  np.zeros(len(every)))
+        search.h.changeColsBounds(len(ones), ones, np.ones(len(ones)), np.ones(len(ones)))
+        value, _, _ = search.solve_lp()
+        best_point = min(best_point, value)
+    search.h.changeColsBounds(len(every), every, np.zeros(len(every)),
+                              np.full(len(every), search.inf))
+    plan = search.integer_master_plan(math.inf, 60.0)
+    assert plan is not None
+    assert CostEvaluator(instance).cost(plan) <= best_point + 1e-9
+
+
 @pytest.mark.parametrize("seed", [4, 7])
 def test_arrival_window_branching_keeps_the_brute_force_optimum(seed: int) -> None:
     # Instances of test_exact_bp_equals_brute_force whose trees branch on arrival windows.
@@ -470,7 +502,8 @@ def test_goods_time_rows_lift_the_root_and_stay_below_the_optimum(
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_the_root_lp_is_the_same_with_and_without_the_ng_relaxation(seed: int) -> None:
+def test_the_root_lp_is_the_same_with_the_ng_relaxation_and_dual_smoothing(
+        seed: int) -> None:
     # Where the relaxation's least is negative but none of its schedules is elementary, the
     # exact labelling must still run: a column it would find changes the LP.
     instance = tiny_instance(300 + seed, n_aavs=2, n_tasks=5, max_demand=4)
@@ -478,6 +511,11 @@ def test_the_root_lp_is_the_same_with_and_without_the_ng_relaxation(seed: int) -
     relaxed = BranchPrice(instance, ng_size=1).root()
     assert exact["converged"] and relaxed["converged"]
     assert relaxed["lp"] == pytest.approx(exact["lp"], rel=1e-9, abs=1e-9)
+    # Smoothed duals steer only the heuristic rounds; the relaxed and exact rounds, which
+    # decide convergence, price the LP's own duals, so the converged LP is the same.
+    smoothed = BranchPrice(instance, ng_size=1, dual_smoothing=0.8).root()
+    assert smoothed["converged"]
+    assert smoothed["lp"] == pytest.approx(exact["lp"], rel=1e-9, abs=1e-9)
 
 
 def test_the_large_instance_measures_switch_on_from_20_and_30_tasks() -> None:

@@ -90,6 +90,12 @@ NG_SIZE = 8
 #: (16/40 root: 0.64 s per re-solve against 1.5 s); at 4/10 their other duals changed the
 #: tree (seed 4: 120 s -> 153 s).
 PRIMAL_FROM_TASKS = 30
+#: From this many tasks up, by default, the heuristic rounds price at duals smoothed by
+#: this weight on the last point (Wentges; BranchPrice.column_generation). On 32/80 seed 1
+#: the root LP after 300 s was 41.3 with it and 50.0 without (its optimum is lower still):
+#: the master is degenerate and its duals jump between extreme points early on.
+SMOOTHING_FROM_TASKS = 30
+SMOOTHING = 0.7
 #: The integer master (BranchPrice.integer_master_plan) runs at the root and then whenever
 #: the columns have grown by this factor since its last run, for at most this share of the
 #: time left (and MASTER_MIP_SECONDS without a time limit).
@@ -148,7 +154,7 @@ class BranchPrice:
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None,
-                 heuristic_round_columns: int = 120, dual_smoothing: float = 0.0,
+                 heuristic_round_columns: int = 120, dual_smoothing: float | None = None,
                  master_mip_nodes: int = 1000) -> None:
         import highspy
 
@@ -181,7 +187,8 @@ class BranchPrice:
         self.primal_resolves = (primal_resolves if primal_resolves is not None
                                 else len(self.tasks) >= PRIMAL_FROM_TASKS)
         self.heuristic_round_columns = heuristic_round_columns
-        self.dual_smoothing = dual_smoothing
+        self.dual_smoothing = (dual_smoothing if dual_smoothing is not None else
+                               SMOOTHING if len(self.tasks) >= SMOOTHING_FROM_TASKS else 0.0)
         self.master_mip_nodes = master_mip_nodes
         self.threads = threads
         self._heuristic_next = 0  # the AAV the next heuristic round starts with

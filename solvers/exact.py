@@ -178,7 +178,7 @@ class BranchPriceAllocator(Settings):
         ng_growth_rounds=NoneOr(Interval(int, 0, None)),
         primal_resolves=NoneOr(Boolean()),
         heuristic_round_columns=Interval(int, 0, None),
-        dual_smoothing=Interval(float, 0, 1, closed="left"),
+        dual_smoothing=NoneOr(Interval(float, 0, 1, closed="left")),
         master_mip_nodes=Interval(int, 0, None),
         threads=Interval(int, 1, None),
     )
@@ -190,7 +190,7 @@ class BranchPriceAllocator(Settings):
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
-                 dual_smoothing: float = 0.0, master_mip_nodes: int = 1000,
+                 dual_smoothing: float | None = None, master_mip_nodes: int = 1000,
                  threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry

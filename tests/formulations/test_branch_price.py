@@ -523,9 +523,9 @@ def test_the_large_instance_measures_switch_on_from_20_and_30_tasks() -> None:
 
     small, middle, large = (BranchPrice(generate(size, 1)) for size in ("4/10", "8/20",
                                                                           "16/40"))
-    assert (small.ng_size, small.primal_resolves) == (0, False)
-    assert (middle.ng_size, middle.primal_resolves) == (8, False)
-    assert (large.ng_size, large.primal_resolves) == (8, True)
+    assert (small.ng_size, small.primal_resolves, small.dual_smoothing) == (0, False, 0.0)
+    assert (middle.ng_size, middle.primal_resolves, middle.dual_smoothing) == (8, False, 0.0)
+    assert (large.ng_size, large.primal_resolves, large.dual_smoothing) == (8, True, 0.7)
     assert large.ng_growth_rounds == 5
     chosen = BranchPrice(generate("4/10", 1), ng_size=3, primal_resolves=True)
     assert (chosen.ng_size, chosen.primal_resolves) == (3, True)

@@ -96,9 +96,10 @@ PRIMAL_FROM_TASKS = 30
 #: the master is degenerate and its duals jump between extreme points early on.
 SMOOTHING_FROM_TASKS = 30
 SMOOTHING = 0.7
-#: The integer master (BranchPrice.integer_master_plan) runs at the root and then whenever
-#: the columns have grown by this factor since its last run, for at most this share of the
-#: time left (and MASTER_MIP_SECONDS without a time limit).
+#: The integer master (BranchPrice.integer_master_plan; off by default, ``master_mip_nodes``
+#: 0) runs at the root and then whenever the columns have grown by this factor since its
+#: last run, for at most this share of the time left (and MASTER_MIP_SECONDS without a time
+#: limit).
 MASTER_MIP_GROWTH = 1.5
 MASTER_MIP_SHARE = 0.1
 MASTER_MIP_SECONDS = 60.0
@@ -155,7 +156,7 @@ class BranchPrice:
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None,
                  heuristic_round_columns: int = 120, dual_smoothing: float | None = None,
-                 master_mip_nodes: int = 1000) -> None:
+                 master_mip_nodes: int = 0) -> None:
         import highspy
 
         self.instance = instance

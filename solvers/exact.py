@@ -190,7 +190,7 @@ class BranchPriceAllocator(Settings):
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
-                 dual_smoothing: float | None = None, master_mip_nodes: int = 1000,
+                 dual_smoothing: float | None = None, master_mip_nodes: int = 0,
                  threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry

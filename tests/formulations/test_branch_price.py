@@ -289,7 +289,7 @@ def test_the_integer_master_is_no_worse_than_any_combination_of_the_lp_support(
     import numpy as np
 
     instance = tiny_instance(400 + seed, n_aavs=2, n_tasks=4, max_demand=5)
-    search = BranchPrice(instance)
+    search = BranchPrice(instance, master_mip_nodes=1000)
     assert search.root()["converged"]
     x = np.asarray(search.h.getSolution().col_value)
     support = [[c for c in search.columns if c.aav == n and x[c.index] > 1e-9]

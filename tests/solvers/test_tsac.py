@@ -455,6 +455,10 @@ def test_the_distillation_target_is_the_labelled_action_of_least_mean_final_J():
     assert best_label([0, 3, 5], [10.0, 7.0, 7.0], reference=5) == 5
     assert best_label([0, 3, 5], [10.0, 7.0, 7.0], reference=0) == 3
     assert best_label([0, 3, 5], [10.0, 7.0, 7.0]) == 3
+    # With a margin the completion's choice stays the target unless beaten by more.
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.5], reference=5, margin=0.5) == 5
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.6], reference=5, margin=0.5) == 3
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.6], reference=5) == 3
 
 
 def test_the_distillation_loss_is_the_cross_entropy_toward_the_least_final_J():

@@ -18,6 +18,9 @@ and the training run behind ``tsac-bench train``.
 * Curriculum: the scales an episode is drawn from change with the share of steps done;
   with the rollout signal, half the episodes are moments of simulated dynamic runs
   (re-plans with committed prefixes) and the cloning weight is annealed to 0.
+* Look-ahead distillation (rollout signal, ``TrainConfig.distill_weight``, off by default):
+  the actor's loss also takes the cross-entropy toward each labelled state's action of
+  least mean final J, the completion's own choice always among the labelled actions.
 
 Files written to the output folder: ``checkpoint.pt`` (everything needed to resume),
 ``policy.pt`` (the actor alone, the form ``tsac-ocf`` loads), ``curve.json`` and

@@ -33,6 +33,7 @@ from tsac_bench.solvers.tsac.env import (  # noqa: E402
     TASK_DIM,
     Observation,
     TaskSelectionEnv,
+    action_choice,
     observe,
     pad,
     replan_moments,
@@ -49,9 +50,14 @@ from tsac_bench.solvers.tsac.policy import (  # noqa: E402
 from tsac_bench.solvers.tsac.sac import (  # noqa: E402
     Batch,
     DiscreteSAC,
+    Labelled,
+    LabelledBatch,
+    LookAheadSelection,
     SACConfig,
     TrainConfig,
     Transition,
+    best_label,
+    label_candidates,
     rollout_values,
     train,
 )
@@ -440,3 +446,98 @@ def test_replan_moments_are_the_states_of_simulated_dynamic_runs():
     again = replan_moments(("6/15",))(np.random.default_rng(4))
     assert (again.instance.name, again.time, again.visible) == (
         moments[0].instance.name, moments[0].time, moments[0].visible)
+
+
+# --- look-ahead distillation ---------------------------------------------------------------
+def test_the_distillation_target_is_the_labelled_action_of_least_mean_final_J():
+    assert best_label([0, 3, 5], [10.0, 7.0, 9.0]) == 3
+    # A tie goes to the completion's own choice if it ties, else to the lowest index.
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.0], reference=5) == 5
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.0], reference=0) == 3
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.0]) == 3
+    # With a margin the completion's choice stays the target unless beaten by more.
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.5], reference=5, margin=0.5) == 5
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.6], reference=5, margin=0.5) == 3
+    assert best_label([0, 3, 5], [10.0, 7.0, 7.6], reference=5) == 3
+
+
+def test_the_distillation_loss_is_the_cross_entropy_toward_the_least_final_J():
+    rng = np.random.default_rng(5)
+    states = [random_state(rng, 4, 2, valid=[0, 1, 3]), random_state(rng, 3, 2, valid=[1, 2]),
+              random_state(rng, 5, 2, valid=[0, 4])]
+    # Finals (10, 7, 9), (4, 4.5), (3, 3): targets 1, 1 and, on the tie, the lowest index 0.
+    items = [Labelled(states[0], (0, 1, 3), (-1.33, 1.67, -0.33), best_label([0, 1, 3],
+                                                                          [10, 7, 9])),
+             Labelled(states[1], (1, 2), (0.25, -0.25), best_label([1, 2], [4, 4.5])),
+             Labelled(states[2], (0, 4), (0.0, 0.0), best_label([0, 4], [3, 3])),
+             Labelled(states[0], (0, 1), (0.5, -0.5))]  # labelled before targets existed
+    assert [item.target for item in items] == [1, 1, 0, None]
+    sac = DiscreteSAC(SMALL, SACConfig())
+    batch = LabelledBatch.of(items, "cpu")
+    assert batch.targets.tolist() == [1, 1, 0, -1]
+    with torch.no_grad():
+        loss = sac.distill_loss(batch).item()
+        expected = -np.mean([torch.log(sac.actor.distribution(collate([s]))[0][0, t]).item()
+                             for s, t in zip(states, (1, 1, 0), strict=True)])
+    assert loss == pytest.approx(expected, rel=1e-5)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_completions_choice_is_always_among_the_labelled_actions(seed):
+    rng = np.random.default_rng(seed)
+    valid = np.sort(rng.choice(40, size=int(rng.integers(2, 30)), replace=False))
+    reference = int(rng.choice(valid))
+    actions = label_candidates(valid, 8, rng, reference)
+    assert reference in actions and len(actions) == min(8, len(valid))
+    assert len(set(actions.tolist())) == len(actions) and set(actions) <= set(valid)
+    assert list(actions) == sorted(actions)
+
+
+def test_with_distillation_every_labelled_state_holds_hocfs_choice(tmp_path, monkeypatch):
+    from tsac_bench.solvers.tsac import sac as sac_module
+
+    real, seen = sac_module.rollout_values, []
+
+    def spy(game, view, actions, features, completion, **keywords):
+        hocf = HeuristicSelection(game.instance, 1.0, 2.0, 1.0).select(view, None)
+        seen.append((hocf, [action_choice(view, a, features) for a in actions]))
+        return real(game, view, actions, features, completion, **keywords)
+
+    monkeypatch.setattr(sac_module, "rollout_values", spy)
+    summary = train(tmp_path, distilling(steps=60), device="cpu")
+    assert len(seen) >= 5 and all(hocf in choices for hocf, choices in seen)
+    distilled = [u["distill_loss"] for u in summary["updates"] if "distill_loss" in u]
+    assert distilled and all(math.isfinite(d) and d > 0 for d in distilled)
+
+
+def distilling(**settings) -> TrainConfig:
+    return TrainConfig(**{"warmup": 20, "pretrain_updates": 3, "eval_every": 1000,
+                          "eval_scale": "4/10", "eval_instances": 1, "checkpoint_every": 1000,
+                          "curriculum": ((0.0, ("8/20",)),), "net": SMALL_V2,
+                          "label_share": 0.5, "label_candidates": 3, "rollouts": 1,
+                          "replan_share": 0.0, "distill_weight": 1.0, **settings})
+
+
+def test_distilled_training_is_the_same_for_the_same_seed(tmp_path):
+    first = train(tmp_path / "a", distilling(steps=40), device="cpu")
+    second = train(tmp_path / "b", distilling(steps=40), device="cpu")
+    assert first["updates"] == second["updates"] and first["episodes"] == second["episodes"]
+    a, b = load_policy(tmp_path / "a" / "policy.pt"), load_policy(tmp_path / "b" / "policy.pt")
+    assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(),
+                                                 b.state_dict().values(), strict=True))
+    other = train(tmp_path / "c", distilling(steps=40, seed=1), device="cpu")
+    assert other["updates"] != first["updates"]
+
+
+def test_the_look_ahead_takes_the_action_of_least_rollout_J():
+    game, view = mid_game()
+    completion = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
+    look_ahead = LookAheadSelection(completion, V2, rollouts=1)
+    choice = look_ahead.select(view, np.random.default_rng(3))
+    # Replayed: the same generator draws the same rollout seed after HOCF's choice.
+    rng = np.random.default_rng(3)
+    valid = np.flatnonzero(observe(view, V2).action_mask)
+    finals = rollout_values(game, view, valid.tolist(), V2, completion, rollouts=1,
+                            seed=int(rng.integers(2**31)))[:, 0]
+    chosen = [action_choice(view, int(a), V2) for a in valid].index(choice)
+    assert finals[chosen] == finals.min() and np.ptp(finals) > 0

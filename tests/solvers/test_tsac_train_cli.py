@@ -71,6 +71,8 @@ def test_without_set_the_configuration_is_the_default(tmp_path, trained):
     ("warmup=ten", ["--set", "'warmup'", "'ten'"]),
     ("demonstrator=dga", ["--set", "'demonstrator'", "'hocf', 'rocf'"]),
     ("label_scale=0", ["--set", "'label_scale'", "> 0"]),
+    ("distill_weight=-1", ["--set", "'distill_weight'", "'-1'", ">= 0"]),
+    ("distill_margin=-0.5", ["--set", "'distill_margin'", "'-0.5'", ">= 0"]),
     ("clone_floor=2.5", ["--set", "'clone_floor'", "2.5", "[0, clone_weight=2.0]"]),
     ("signal", ["--set", "'signal'", "expected KEY=VALUE"]),
 ])

@@ -198,27 +198,32 @@ def _ng_pricing_checks(seed: int) -> int:
     priced as the evaluator prices them. Returns how often it was strictly lower."""
     instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
     narrow, wide = BranchPrice(instance, ng_size=1), BranchPrice(instance, ng_size=4)
-    rng = random.Random(seed)
     strictly_lower = 0
-    for n in range(instance.n_aavs):
-        for _ in range(4):
-            prices = _random_prices(narrow, n, rng)
-            conv = -prices.base
-            prices.base = narrow.reduced_cost(narrow.make_column(n, ()), prices) - conv
-            windows = _arrival_windows(narrow, n, rng)
-            exact, _ = narrow.pricers[n].price(prices, windows)
-            relaxed, found = narrow.pricers[n].price(prices, windows, relaxed=True)
-            assert relaxed <= exact + 1e-12
-            strictly_lower += relaxed < exact - 1e-9
-            assert wide.pricers[n].price(prices, windows, relaxed=True)[0] == exact
-            for schedule in found:
-                tasks = [v.node for v in schedule.tail if not instance.is_depot(v.node)]
-                assert len(tasks) == len(set(tasks))
-                column = narrow.make_column(n, schedule.tail)
-                assert _compatible(column, windows)
-                assert schedule.reduced_cost == pytest.approx(
-                    narrow.reduced_cost(column, prices) - conv, abs=1e-9)
+    for n, prices, conv, windows in _random_pricing_cases(narrow, seed):
+        exact, _ = narrow.pricers[n].price(prices, windows)
+        relaxed, found = narrow.pricers[n].price(prices, windows, relaxed=True)
+        assert relaxed <= exact + 1e-12
+        strictly_lower += relaxed < exact - 1e-9
+        assert wide.pricers[n].price(prices, windows, relaxed=True)[0] == exact
+        for schedule in found:
+            tasks = [v.node for v in schedule.tail if not instance.is_depot(v.node)]
+            assert len(tasks) == len(set(tasks))
+            column = narrow.make_column(n, schedule.tail)
+            assert _compatible(column, windows)
+            assert schedule.reduced_cost == pytest.approx(
+                narrow.reduced_cost(column, prices) - conv, abs=1e-9)
     return strictly_lower
+
+
+def _random_pricing_cases(search: BranchPrice, seed: int, per_aav: int = 4):
+    """(AAV, random duals, their convexity dual, random arrival windows), per_aav per AAV."""
+    rng = random.Random(seed)
+    for n in range(search.instance.n_aavs):
+        for _ in range(per_aav):
+            prices = _random_prices(search, n, rng)
+            conv = -prices.base
+            prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
+            yield n, prices, conv, _arrival_windows(search, n, rng)
 
 
 def test_ng_pricing_bounds_the_exact_least_and_returns_only_schedules() -> None:
@@ -248,29 +253,22 @@ def _ng_growth_checks(seed: int) -> int:
     Returns how often the neighbourhoods grew."""
     instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
     exact_search, growing = BranchPrice(instance, ng_size=1), BranchPrice(instance, ng_size=1)
-    rng = random.Random(seed)
     grew = 0
-    for n in range(instance.n_aavs):
-        for _ in range(4):
-            prices = _random_prices(exact_search, n, rng)
-            conv = -prices.base
-            prices.base = exact_search.reduced_cost(exact_search.make_column(n, ()),
-                                                    prices) - conv
-            windows = _arrival_windows(exact_search, n, rng)
-            drawn, _ = exact_search.pricers[n].price(prices, windows)
-            # As drawn, and shifted so that no schedule prices out (a converged LP): there
-            # the relaxation's negative paths are all cycles.
-            for shift in (0.0, 1e-3 - drawn):
-                shifted = dataclasses.replace(prices, base=prices.base + shift)
-                exact = drawn + shift
-                before = growing.pricers[n]._ng_memory.copy()
-                relaxed, found = growing.pricers[n].price(shifted, windows, relaxed=True,
-                                                          growth_rounds=100)
-                grew += bool((growing.pricers[n]._ng_memory != before).any())
-                assert relaxed <= exact + 1e-12
-                assert bool(found) == (exact < -1e-9), (found, relaxed, exact)
-                if not found:
-                    assert relaxed >= -1e-9
+    for n, prices, _, windows in _random_pricing_cases(exact_search, seed):
+        drawn, _ = exact_search.pricers[n].price(prices, windows)
+        # As drawn, and shifted so that no schedule prices out (a converged LP): there the
+        # relaxation's negative paths are all cycles.
+        for shift in (0.0, 1e-3 - drawn):
+            shifted = dataclasses.replace(prices, base=prices.base + shift)
+            exact = drawn + shift
+            before = growing.pricers[n]._ng_memory.copy()
+            relaxed, found = growing.pricers[n].price(shifted, windows, relaxed=True,
+                                                      growth_rounds=100)
+            grew += bool((growing.pricers[n]._ng_memory != before).any())
+            assert relaxed <= exact + 1e-12
+            assert bool(found) == (exact < -1e-9), (found, relaxed, exact)
+            if not found:
+                assert relaxed >= -1e-9
     return grew
 
 

@@ -822,6 +822,15 @@ class BranchPrice:
         def tolerance(J: float) -> float:
             return PRUNE_TOLERANCE * max(1.0, abs(J))
 
+        def offer(plan: tuple[Route, ...]) -> tuple[float, bool]:
+            """The plan's J, and whether it replaced the incumbent."""
+            nonlocal best_J, best_routes
+            J = self.evaluator.cost(plan)
+            if best_J - tolerance(best_J) > J:
+                best_J, best_routes = J, plan
+                return J, True
+            return J, False
+
         mip_columns = 0  # the columns at the integer master's last run (0: not yet run)
         while queue:
             bound, _, decisions, basis = heapq.heappop(queue)
@@ -841,10 +850,7 @@ class BranchPrice:
                     best_J, MASTER_MIP_SECONDS if left == math.inf else MASTER_MIP_SHARE * left)
                 clock["master_mip"] += time.perf_counter() - solving
                 if plan is not None:
-                    J = self.evaluator.cost(plan)
-                    if best_J - tolerance(best_J) > J:
-                        best_J, best_routes = J, plan
-                        mip_improved += 1
+                    mip_improved += offer(plan)[1]
                 if bound >= best_J - tolerance(best_J):
                     continue
             nodes += 1
@@ -855,10 +861,7 @@ class BranchPrice:
             node_bound = max(node_bound, bound)
             if root_bound is None:
                 root_bound = node_bound
-            plan = self.rounded_plan(x)
-            J = self.evaluator.cost(plan)
-            if best_J - tolerance(best_J) > J:
-                best_J, best_routes = J, plan
+            offer(self.rounded_plan(x))
             if node_bound >= best_J - tolerance(best_J):
                 continue
             if not converged:  # the deadline: keep the node open with its bound
@@ -886,9 +889,7 @@ class BranchPrice:
                     log(f"node {nodes}: LP {value:.6f} bound {node_bound:.6f} "
                         f"best {best_J:.6f} branch {choice}")
                 continue
-            J = self.evaluator.cost(choice)
-            if best_J - tolerance(best_J) > J:
-                best_J, best_routes = J, choice
+            J, _ = offer(choice)
             if value + 1e-6 * max(1.0, abs(value)) < J:
                 status, stop_reason = "error", (f"integral LP {value} but its plan has J {J}")
                 break

@@ -280,6 +280,11 @@ class BranchPrice:
         self.columns: list[Column] = []
         self.by_key: dict[tuple[int, tuple[Visit, ...], frozenset[int]], Column] = {}
         self.robust: dict[tuple, tuple[int, int]] = {}  # decision key -> (row, artificial)
+        # Arrival-window branching's "later than" sides: (AAV, task, threshold) -> the row
+        # sum of lambda over the AAV's columns that visit the task with theta <= threshold,
+        # <= 0 where the decision holds (its dual prices early visits in the labelling,
+        # where a hard floor would break the dominance of earlier labels).
+        self.early: dict[tuple[int, int, float], int] = {}
         # The columns by (AAV, free task visited) and (AAV, free arc); the LP columns whose
         # upper bound is 0 at the current node.
         self.visiting: dict[tuple[int, int], list[Column]] = {}
@@ -349,6 +354,7 @@ class BranchPrice:
         for key, (row, _) in self.robust.items():
             if _robust_matches(key, col):
                 entries.append((row, 1.0))
+        entries += [(row, 1.0) for key, row in self.early.items() if _early_visit(key, col)]
         entries += [(row, float(coef[n])) for row, m, coef in self.cuts
                     if n in coef and m in col.amounts]
         for row, n1, n2, j in self.symmetry:
@@ -377,6 +383,15 @@ class BranchPrice:
             artificial = self._col(self.big, 0.0, 0.0, [(row, 1.0)])
             self.robust[key] = (row, artificial)
         return self.robust[key]
+
+    def _early_row(self, key: tuple[int, int, float]) -> int:
+        if key not in self.early:
+            row = self._row(-self.inf, self.inf)
+            for col in self.visiting.get(key[:2], ()):
+                if _early_visit(key, col):
+                    self.h.changeCoeff(row, col.index, 1.0)
+            self.early[key] = row
+        return self.early[key]
 
     def basis(self) -> tuple[list, list]:
         """The LP's current basis (column and row statuses)."""
@@ -425,7 +440,7 @@ class BranchPrice:
         """Set the LP and the pricing restrictions to a node's decisions."""
         restrictions = [Restrictions(frozenset(), frozenset(), {}, {})
                         for _ in self.instance.aavs]
-        active = set()
+        active, early = set(), set()
         forbid_t = [set() for _ in self.instance.aavs]
         forbid_a = [set() for _ in self.instance.aavs]
         for d in decisions:
@@ -442,7 +457,7 @@ class BranchPrice:
             elif d.kind == "time" and d.side == "le":
                 r.arrival_high[d.key] = min(r.arrival_high.get(d.key, math.inf), d.value)
             elif d.kind == "time":
-                r.arrival_low[d.key] = max(r.arrival_low.get(d.key, -math.inf), d.value)
+                early.add((d.aav, d.key, d.value))
             else:
                 active.add((d.kind, d.aav, d.key))
         for n, r in enumerate(restrictions):
@@ -454,6 +469,10 @@ class BranchPrice:
             on = key in active
             self.h.changeRowBounds(row, 1.0 if on else -self.inf, self.inf)
             self.h.changeColBounds(artificial, 0.0, self.inf if on else 0.0)
+        for key in early:
+            self._early_row(key)
+        for key, row in self.early.items():
+            self.h.changeRowBounds(row, -self.inf, 0.0 if key in early else self.inf)
         # Only the columns whose bound changes since the last node are touched: the ones
         # each decision excludes are found through the visit and arc indexes.
         closed = set()
@@ -462,7 +481,7 @@ class BranchPrice:
                 closed.update(c.index for c in self.visiting.get((n, m), ()))
             for arc in r.forbidden_arcs:
                 closed.update(c.index for c in self.using_arc.get((n, arc), ()))
-            for m in {*r.amount_low, *r.amount_high, *r.arrival_low, *r.arrival_high}:
+            for m in {*r.amount_low, *r.amount_high, *r.arrival_high}:
                 closed.update(c.index for c in self.visiting.get((n, m), ())
                               if not _compatible(c, r))
         for index in closed - self.closed:
@@ -498,9 +517,13 @@ class BranchPrice:
                         cut_bonus[i] = cut_bonus.get(i, 0.0) + duals[row]
             elif n == n2:
                 cut_bonus[j] = cut_bonus.get(j, 0.0) - duals[row]
+        early_penalty: dict[int, list[tuple[float, float]]] = {}
+        for (k, m, threshold), row in self.early.items():
+            if k == n and duals[row] < 0.0:  # a <= row: its dual is <= 0
+                early_penalty.setdefault(m, []).append((threshold, -duals[row]))
         prices = TaskPrices(0.0, cover, aav_time, closer, closer_time,
                             visit_bonus=visit_bonus, arc_bonus=arc_bonus, cut_bonus=cut_bonus,
-                            goods_time=goods_time)
+                            goods_time=goods_time, early_penalty=early_penalty)
         prices.base = self.reduced_cost(self.make_column(n, ()), prices) - duals[self.conv[n]]
         return prices
 
@@ -523,6 +546,9 @@ class BranchPrice:
         rc -= sum(prices.visit_bonus.get(m, 0.0) for m in col.free_amounts)
         rc -= sum(prices.cut_bonus.get(m, 0.0) for m in col.amounts)
         rc -= sum(prices.arc_bonus.get(a, 0.0) for a in col.arcs)
+        for m, steps in prices.early_penalty.items():
+            if m in col.free_amounts and m in col.theta:
+                rc += sum(p for threshold, p in steps if col.theta[m] <= threshold)
         return rc
 
     # --- column generation at one node ---------------------------------------------------
@@ -944,6 +970,13 @@ def _robust_matches(key: tuple, col: Column) -> bool:
     return what in col.free_amounts if kind == "visit" else what in col.arcs
 
 
+def _early_visit(key: tuple[int, int, float], col: Column) -> bool:
+    """Whether the column visits the key's task too early for its "later than" side (a
+    free visit without an arrival term is late, past every threshold)."""
+    k, m, threshold = key
+    return col.aav == k and m in col.free_amounts and col.theta.get(m, math.inf) <= threshold
+
+
 def _compatible(col: Column, r: Restrictions) -> bool:
     if any(m in r.forbidden_tasks for m in col.free_amounts):
         return False
@@ -955,9 +988,6 @@ def _compatible(col: Column, r: Restrictions) -> bool:
     # A free visit without an arrival term is late (past every threshold).
     for m, hi in r.arrival_high.items():
         if m in col.free_amounts and col.theta.get(m, math.inf) > hi:
-            return False
-    for m, lo in r.arrival_low.items():
-        if m in col.free_amounts and col.theta.get(m, math.inf) <= lo:
             return False
     return all(col.free_amounts.get(m, lo) >= lo for m, lo in r.amount_low.items())
 

@@ -21,13 +21,18 @@ node when every completion of L2 is a completion of L1 at no higher reduced cost
   Dcum: both beyond the range (every later visit pays the full-range cost), or Dcum1 <= Dcum2
   when the full-range cost is at least the cost of any leg (q is then non-decreasing in Dcum),
   or Dcum1 == Dcum2 otherwise;
-  and, where a branching decision asks a task's arrival to be later than a floor
-  (``Restrictions.arrival_low``): clock1 == clock2, or L2 has visited that task, or L2 can
-  no longer reach it on time, or every arrival at it from L1 is past the floor (an earlier
-  clock could otherwise reach it too early). "Reach" uses the straight leg from the label's
-  task, which no path beats (distances obey the triangle inequality, and waiting for a
-  window only adds time), shortened by a relative 1e-9 so that the test stays on the safe
-  side of the float sums of the real legs.
+  and, where a branching decision asks a task's arrival to be later than a floor (the
+  master's row that keeps early visits out, whose dual is a penalty on them,
+  ``TaskPrices.early_penalty``; the only price term that falls with the arrival): L1
+  pays in advance the penalty its earliest possible arrival there would pay, unless L2
+  has visited that task or can no longer reach it on time, or the clocks are equal.
+  Every completion of L2 is then one of L1 at no higher reduced cost: L1 arrives no later
+  anywhere, so it pays at most that penalty more. "Reach" and L1's earliest arrival use
+  the straight leg from the label's task, which no path beats (distances obey the
+  triangle inequality, and waiting for a window only adds time), shortened by a relative
+  1e-9 so that the test stays on the safe side of the float sums of the real legs.
+  (A hard floor in the labelling instead breaks the clock rule outright: an exact call
+  under one ran for a minute on 4/10 seed 1, where the penalty is small.)
 The ng relaxation (``Pricer.price(relaxed=True)``) keeps, in place of the visited set, the
 label's memory: of the tasks visited, those in the neighbourhood of the label's task (and the
 committed ones); a task out of memory may be visited again. Its least reduced cost is over a
@@ -60,7 +65,9 @@ class TaskPrices:
     + min(0, closer_time[m] * theta - closer[m]) - visit_bonus[m] - cut_bonus[m] to the
     reduced cost, theta = (t - t_start) / horizon (time terms only for tasks in ``timed``);
     each arc adds -arc_bonus[(tail, head, mode)]. goods_time[m] >= 0, so the price per kg
-    falls with the arrival: an earlier clock is still never worse."""
+    falls with the arrival: an earlier clock is never worse, except for ``early_penalty``
+    (arrival-window branching's "later than" side): a visit to m whose theta is <= a
+    threshold pays that threshold's penalty (>= 0), summed over m's thresholds."""
 
     base: float  # reduced cost of the empty schedule (prefix only): -convexity dual + prefix
     cover: dict[int, float]
@@ -71,6 +78,7 @@ class TaskPrices:
     cut_bonus: dict[int, float] = field(default_factory=dict)  # coalition cover cuts
     arc_bonus: dict[tuple[int, int, int], float] = field(default_factory=dict)
     goods_time: dict[int, float] = field(default_factory=dict)  # goods-weighted arrival rows
+    early_penalty: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
 
 
 @dataclass
@@ -82,9 +90,9 @@ class Restrictions:
     amount_low: dict[int, int] = field(default_factory=dict)
     amount_high: dict[int, int] = field(default_factory=dict)
     #: Arrival-window branching on a timed task m: a visit to m must have its arrival term
-    #: theta = (t - t_start) / horizon <= arrival_high[m], or > arrival_low[m].
+    #: theta = (t - t_start) / horizon <= arrival_high[m] (the other side, "later than", is
+    #: a master row: TaskPrices.early_penalty).
     arrival_high: dict[int, float] = field(default_factory=dict)
-    arrival_low: dict[int, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -249,7 +257,14 @@ class Pricer:
         forbidden_task[list(restrictions.forbidden_tasks)] = True
         low = per_task(restrictions.amount_low, 1, np.int64)
         high = per_task(restrictions.amount_high, self.capacity, np.int64)
-        theta_low = per_task(restrictions.arrival_low, -np.inf)
+        slots = max((len(v) for v in prices.early_penalty.values()), default=0)
+        early_theta = np.full((n_tasks, max(slots, 1)), -np.inf)
+        early_penalty = np.zeros((n_tasks, max(slots, 1)))
+        for m, steps in prices.early_penalty.items():
+            for q, (threshold, penalty) in enumerate(steps):
+                early_theta[m, q], early_penalty[m, q] = threshold, penalty
+        penalised = sorted(m for m, steps in prices.early_penalty.items()
+                           if any(p > 0.0 for _, p in steps))
         theta_high = per_task(restrictions.arrival_high, np.inf)
         root = np.full((size, size), np.inf)
         root[self.anchor.peak:, self.anchor.pickup:] = prices.base
@@ -258,7 +273,7 @@ class Pricer:
             per_task(prices.closer_time), per_task(prices.goods_time),
             per_task(prices.visit_bonus),
             per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
-            theta_low, theta_high, np.array(sorted(restrictions.arrival_low), np.int64))
+            theta_high, early_theta, early_penalty, np.array(penalised, np.int64))
         best = -math.inf
         chosen: list[Schedule] = []
         for _ in range(1 + (growth_rounds if relaxed else 0)):
@@ -287,6 +302,7 @@ class Pricer:
             self._ng_memory if relaxed else self._full_memory, not relaxed,
             0 if label_cap is None else label_cap, deadline)
         cost, alive, finished = labels[0], labels[1], labels[9]
+        self.last_label_count = len(cost)  # diagnostics: how hard the last call was
         least = float(cost.min()) if finished else -math.inf
         chosen, seen, cycles = [], set(), []
         for k in np.flatnonzero(alive)[np.argsort(cost[alive], kind="stable")]:
@@ -449,8 +465,20 @@ def _first_visit_table(dst, least, delivery, price, low, high):
 
 
 @njit(cache=True)
+def _early_cost(early_theta, early_penalty, j, theta):
+    """The penalty a visit to j at arrival term theta pays (its thresholds at or above
+    theta)."""
+    total = 0.0
+    for q in range(early_theta.shape[1]):
+        if theta <= early_theta[j, q]:
+            total += early_penalty[j, q]
+    return total
+
+
+@njit(cache=True)
 def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone,
-               floored, theta_low, t_start, t_end, horizon, reach, elementary):
+               penalised, early_theta, early_penalty, t_start, t_end, horizon, reach,
+               elementary):
     """The rule of the module docstring; the cheap scalar tests go first (the table test
     needs cost_a <= cost_b, its cell (B, B)). Without ``elementary`` (the ng relaxation)
     a task in b's memory is not out of b's reach: b may come back once it forgets it."""
@@ -459,18 +487,21 @@ def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcu
     for w in range(visited.shape[1]):
         if visited[a, w] & ~visited[b, w]:
             return False
-    # A task that must be reached late (theta > theta_low): b's completion may reach it late
-    # enough where a's earlier clock does not, unless b cannot visit it any more (visited,
-    # or out of reach before its window closes), both arrive alike, or any arrival from
-    # a is already late enough. reach[m] is the straight leg's time from a's and b's task.
+    # A penalised task (early visits pay): on b's completion a may arrive early enough to
+    # pay where b does not, at most the penalty of a's earliest arrival, unless b cannot
+    # visit it any more (visited, or out of reach before its window closes). reach[m] is
+    # the straight leg's time from a's and b's task.
+    charge = 0.0
     if clock[a] < clock[b]:
-        for m in floored:
+        for m in penalised:
             if (elementary and (visited[b, m >> 6] >> (m & 63)) & 1) or \
                     clock[b] + reach[m] > t_end[m]:
                 continue
             earliest = max(t_start[m], clock[a] + reach[m])
-            if (earliest - t_start[m]) / horizon <= theta_low[m]:
-                return False
+            charge += _early_cost(early_theta, early_penalty, m,
+                                  (earliest - t_start[m]) / horizon)
+        if cost[a] + charge > cost[b]:
+            return False
     if not (flown[a] > max_range and flown[b] > max_range):
         if dcum_monotone:
             if flown[a] > flown[b]:
@@ -482,7 +513,7 @@ def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcu
     ta, tb = tables[a], tables[b]
     for x in range(ta.shape[0]):
         for y in range(x + 1):
-            if ta[x, y] > tb[x, y]:
+            if ta[x, y] + charge > tb[x, y]:
                 return False
     return True
 
@@ -494,8 +525,9 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                anchor_node, anchor_clock, anchor_flown, anchor_visited, anchor_loaded, root,
                cover, aav_time, closer, closer_time, goods_time, visit_bonus, cut_bonus,
                arc_bonus,
-               forbidden_task, forbidden_arc, amount_low, amount_high, theta_low,
-               theta_high, floored, reach, ng_memory, elementary, label_cap, deadline):
+               forbidden_task, forbidden_arc, amount_low, amount_high, theta_high,
+               early_theta, early_penalty, penalised, reach, ng_memory, elementary,
+               label_cap, deadline):
     """Every undominated label from the anchor, extended path length by path length (with
     ``label_cap`` > 0 only the cheapest that many per node and length go on).
 
@@ -580,8 +612,9 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                 p = cover[j]
                 if timed[j]:
                     theta = (t - t_start[j]) / horizon
-                    if theta > theta_high[j] or theta <= theta_low[j]:
+                    if theta > theta_high[j]:
                         continue
+                    c += _early_cost(early_theta, early_penalty, j, theta)
                     c += aav_time[j] * theta
                     c += min(0.0, closer_time[j] * theta - closer[j])
                     p -= goods_time[j] * theta
@@ -629,7 +662,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                         other = bucket[j, i]
                         if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
                                                        flown, tables, max_range,
-                                                       dcum_monotone, floored, theta_low,
+                                                       dcum_monotone, penalised,
+                                                       early_theta, early_penalty,
                                                        t_start, t_end, horizon, reach[j],
                                                        elementary):
                             rejected = True
@@ -644,7 +678,8 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                     if bucket_clock[j, i] >= t and bucket_cost[j, i] >= cost[k] and \
                             tasks & ~bucket_tasks[j, i] == 0 and \
                             _dominates(k, other, clock, cost, loaded, visited, flown, tables,
-                                       max_range, dcum_monotone, floored, theta_low,
+                                       max_range, dcum_monotone, penalised,
+                                       early_theta, early_penalty,
                                        t_start, t_end, horizon, reach[j], elementary):
                         alive[other] = False
                         continue

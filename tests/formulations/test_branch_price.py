@@ -135,9 +135,12 @@ def _pricing_matches_every_schedule(search: BranchPrice, rng: random.Random) -> 
     return checked
 
 
-def _arrival_windows(search: BranchPrice, n: int, rng: random.Random) -> Restrictions:
+def _arrival_windows(search: BranchPrice, n: int, rng: random.Random,
+                     prices: TaskPrices) -> Restrictions:
     """Arrival-window decisions on random tasks, each threshold one schedule's arrival
-    term there (so both sides hold schedules)."""
+    term there (so both sides hold schedules): a "no later than" side is a restriction,
+    a "later than" side a penalty on the early visits in ``prices`` (the dual of its
+    master row), small (0.01) or prohibitive (100)."""
     terms: dict[int, set[float]] = {}
     for tail in all_schedules(search.pricers[n]):
         for m, t in search.make_column(n, tail).theta.items():
@@ -149,33 +152,78 @@ def _arrival_windows(search: BranchPrice, n: int, rng: random.Random) -> Restric
         if side == "high":
             restrictions.arrival_high[m] = threshold
         elif side == "low":
-            restrictions.arrival_low[m] = threshold
+            prices.early_penalty[m] = [(threshold, rng.choice([0.01, 100.0]))]
     return restrictions
+
+
+def _windows_case(search: BranchPrice, n: int, rng: random.Random, scale: float = 1.0
+                  ) -> tuple[TaskPrices, float, Restrictions]:
+    """Random duals (times ``scale``), their convexity dual and random arrival windows."""
+    prices = _random_prices(search, n, rng)
+    for terms in (prices.cover, prices.aav_time, prices.closer, prices.closer_time,
+                  prices.goods_time, prices.visit_bonus, prices.cut_bonus, prices.arc_bonus):
+        for key in terms:
+            terms[key] *= scale
+    conv = -prices.base
+    windows = _arrival_windows(search, n, rng, prices)
+    prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
+    return prices, conv, windows
+
+
+def _least_allowed(search: BranchPrice, n: int, prices: TaskPrices, conv: float,
+                   windows: Restrictions) -> float:
+    allowed = [search.make_column(n, tail) for tail in all_schedules(search.pricers[n])]
+    return min(search.reduced_cost(c, prices) - conv for c in allowed
+               if _compatible(c, windows))
 
 
 @pytest.mark.parametrize("seed", range(8))
 def test_pricing_under_arrival_windows_finds_the_least_of_the_allowed_schedules(
         seed: int) -> None:
-    # The "later than" side weakens the clock rule of dominance: an earlier label may reach
-    # the task too early where a later one does not.
+    # The "later than" side's penalty falls with the arrival, against the clock rule of
+    # dominance: an earlier label may pay it where a later one does not.
     instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
     search = BranchPrice(instance)
     rng = random.Random(seed)
     restricted = 0
     for n, pricer in enumerate(search.pricers):
         for _ in range(3):
-            prices = _random_prices(search, n, rng)
-            conv = -prices.base
-            prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
-            windows = _arrival_windows(search, n, rng)
+            prices, conv, windows = _windows_case(search, n, rng)
             least, found = pricer.price(prices, windows)
-            allowed = [search.make_column(n, tail) for tail in all_schedules(pricer)]
-            allowed = [c for c in allowed if _compatible(c, windows)]
-            assert least == pytest.approx(
-                min(search.reduced_cost(c, prices) - conv for c in allowed), abs=1e-9)
-            assert all(_compatible(search.make_column(n, f.tail), windows) for f in found)
-            restricted += bool(windows.arrival_low or windows.arrival_high)
+            assert least == pytest.approx(_least_allowed(search, n, prices, conv, windows),
+                                          abs=1e-9)
+            for f in found:
+                column = search.make_column(n, f.tail)
+                assert _compatible(column, windows)
+                assert f.reduced_cost == pytest.approx(
+                    search.reduced_cost(column, prices) - conv, abs=1e-9)
+            restricted += bool(prices.early_penalty or windows.arrival_high)
     assert restricted >= 3
+
+
+def test_an_earlier_label_that_pays_the_early_penalty_in_advance_dominates_exactly(
+        ) -> None:
+    # With small duals and penalties the charge is small, so earlier labels still dominate
+    # later ones at a penalised task: fewer labels than with prohibitive penalties (which
+    # stop that), and the least is still the least of every allowed schedule.
+    fewer = 0
+    for seed in range(8):
+        instance = tiny_instance(seed, n_aavs=2, n_tasks=5, max_demand=3)
+        search = BranchPrice(instance)
+        rng = random.Random(seed)
+        for n, pricer in enumerate(search.pricers):
+            for _ in range(2):
+                prices, conv, windows = _windows_case(search, n, rng, scale=0.01)
+                counts = []
+                for penalty in (0.01, 100.0):
+                    for m, steps in prices.early_penalty.items():
+                        prices.early_penalty[m] = [(t, penalty) for t, _ in steps]
+                    least, _ = pricer.price(prices, windows)
+                    assert least == pytest.approx(
+                        _least_allowed(search, n, prices, conv, windows), abs=1e-9)
+                    counts.append(pricer.last_label_count)
+                fewer += counts[0] < counts[1]
+    assert fewer >= 5
 
 
 def test_a_pricing_call_stops_at_the_deadline_and_then_claims_no_bound() -> None:
@@ -220,10 +268,7 @@ def _random_pricing_cases(search: BranchPrice, seed: int, per_aav: int = 4):
     rng = random.Random(seed)
     for n in range(search.instance.n_aavs):
         for _ in range(per_aav):
-            prices = _random_prices(search, n, rng)
-            conv = -prices.base
-            prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
-            yield n, prices, conv, _arrival_windows(search, n, rng)
+            yield n, *_windows_case(search, n, rng)
 
 
 def test_ng_pricing_bounds_the_exact_least_and_returns_only_schedules() -> None:

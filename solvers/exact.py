@@ -186,7 +186,7 @@ class BranchPriceAllocator(Settings):
     def __init__(self, time_limit: float | None = None, incumbent: str = "dga",
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
                  closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
-                 strong_candidates: int = 4, time_branching: bool = True,
+                 strong_candidates: int = 8, time_branching: bool = True,
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,

@@ -547,8 +547,7 @@ class BranchPrice:
         rc -= sum(prices.cut_bonus.get(m, 0.0) for m in col.amounts)
         rc -= sum(prices.arc_bonus.get(a, 0.0) for a in col.arcs)
         for m, steps in prices.early_penalty.items():
-            if m in col.free_amounts and m in col.theta:
-                rc += sum(p for threshold, p in steps if col.theta[m] <= threshold)
+            rc += sum(p for threshold, p in steps if _early_visit((col.aav, m, threshold), col))
         return rc
 
     # --- column generation at one node ---------------------------------------------------

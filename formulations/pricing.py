@@ -175,6 +175,7 @@ class Pricer:
         self.demand = {j: instance.tasks[j].demand for j in network.tasks}
         self.delivery = {j: instance.tasks[j].is_delivery for j in network.tasks}
         self.horizon = float(instance.horizon)
+        self.last_label_count = 0  # diagnostics: the labels the last call created
         # The compiled labelling's view: node n_tasks is START; arcs grouped by tail (CSR).
         n_tasks = instance.n_tasks
         self._start_node = n_tasks
@@ -263,8 +264,7 @@ class Pricer:
         for m, steps in prices.early_penalty.items():
             for q, (threshold, penalty) in enumerate(steps):
                 early_theta[m, q], early_penalty[m, q] = threshold, penalty
-        penalised = sorted(m for m, steps in prices.early_penalty.items()
-                           if any(p > 0.0 for _, p in steps))
+        penalised = sorted(prices.early_penalty)
         theta_high = per_task(restrictions.arrival_high, np.inf)
         root = np.full((size, size), np.inf)
         root[self.anchor.peak:, self.anchor.pickup:] = prices.base
@@ -302,7 +302,7 @@ class Pricer:
             self._ng_memory if relaxed else self._full_memory, not relaxed,
             0 if label_cap is None else label_cap, deadline)
         cost, alive, finished = labels[0], labels[1], labels[9]
-        self.last_label_count = len(cost)  # diagnostics: how hard the last call was
+        self.last_label_count = len(cost)
         least = float(cost.min()) if finished else -math.inf
         chosen, seen, cycles = [], set(), []
         for k in np.flatnonzero(alive)[np.argsort(cost[alive], kind="stable")]:

@@ -302,9 +302,12 @@ class DiscreteSAC:
         return sum(F.mse_loss(q(batch.states).gather(1, chosen).squeeze(1), target)
                    for q in self.critics)
 
-    def actor_loss(self, batch: Batch) -> tuple[Tensor, Tensor]:
-        """Eq. 16 and the entropy of each state's policy (for the temperature)."""
-        probs, log_probs = self.actor.distribution(batch.states)
+    def actor_loss(self, batch: Batch, distribution: tuple[Tensor, Tensor] | None = None
+                   ) -> tuple[Tensor, Tensor]:
+        """Eq. 16 and the entropy of each state's policy (for the temperature).
+        ``distribution``: the actor's (probabilities, log-probabilities) on the batch's
+        states where the caller has them already."""
+        probs, log_probs = distribution or self.actor.distribution(batch.states)
         with torch.no_grad():
             q = torch.minimum(*(c(batch.states) for c in self.critics))
         mask = batch.states["action_mask"]
@@ -328,10 +331,12 @@ class DiscreteSAC:
             loss = loss + torch.where(batch.label_mask, error, zero).sum() / count
         return loss
 
-    def distill_loss(self, batch: LabelledBatch) -> Tensor:
+    def distill_loss(self, batch: LabelledBatch, log_probs: Tensor | None = None) -> Tensor:
         """Cross-entropy of the actor against each state's distillation target (the
-        labelled action of least mean final J), over the states that have one."""
-        _, log_probs = self.actor.distribution(batch.states)
+        labelled action of least mean final J), over the states that have one;
+        ``log_probs``: the actor's on the batch's states where the caller has them."""
+        if log_probs is None:
+            _, log_probs = self.actor.distribution(batch.states)
         has = batch.targets >= 0
         if not bool(has.any()):
             return torch.zeros((), device=batch.labels.device)
@@ -349,28 +354,35 @@ class DiscreteSAC:
         _descend(self.critic_optimizer, critic_loss)
         states = Batch(batch.states, torch.zeros(0), torch.zeros(0), batch.states,
                        torch.zeros(0))
-        distill = self.distill_loss(batch) if distill_weight > 0 else None
+        distill: list[Tensor] = []  # the unweighted term, for the stats
+
+        def weighted_distill(log_probs: Tensor) -> Tensor:
+            distill.append(self.distill_loss(batch, log_probs))
+            return distill_weight * distill[0]
+
         actor_loss, entropy = self._policy_step(
             states, demonstrations, clone_weight,
-            None if distill is None else distill_weight * distill)
+            weighted_distill if distill_weight > 0 else None)
         stats = {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(),
                  "entropy": entropy.mean().item(), "alpha": self.alpha.item(),
                  "clone_weight": clone_weight}
-        if distill is not None:
-            stats["distill_loss"] = distill.item()
+        if distill:
+            stats["distill_loss"] = distill[0].item()
         return stats
 
     def _policy_step(self, batch: Batch, demonstrations: Batch | None,
-                     clone_weight: float, extra: Tensor | None = None
+                     clone_weight: float, extra: Callable[[Tensor], Tensor] | None = None
                      ) -> tuple[Tensor, Tensor]:
         """The actor's step (Eq. 16, plus ``clone_weight`` times the cross-entropy on
-        demonstrations, plus an ``extra`` term) and the temperature's; returns the actor
-        loss and the entropies."""
-        actor_loss, entropy = self.actor_loss(batch)
+        demonstrations, plus ``extra`` of the actor's log-probabilities on the batch's
+        states, from the same forward pass) and the temperature's; returns the actor loss
+        and the entropies."""
+        distribution = self.actor.distribution(batch.states)
+        actor_loss, entropy = self.actor_loss(batch, distribution)
         if demonstrations is not None and clone_weight > 0:
             actor_loss = actor_loss + clone_weight * self.clone_loss(demonstrations)
         if extra is not None:
-            actor_loss = actor_loss + extra
+            actor_loss = actor_loss + extra(distribution[1])
         _descend(self.actor_optimizer, actor_loss)
         _descend(self.alpha_optimizer, self.alpha_loss(entropy, batch.states["action_mask"]))
         return actor_loss, entropy

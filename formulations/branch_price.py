@@ -107,6 +107,12 @@ MASTER_MIP_SECONDS = 60.0
 #: them and runs again, at most this many times (Pricer.price, ``growth_rounds``), before
 #: the exact labelling is asked.
 NG_GROWTH_ROUNDS = 5
+#: Dives (BranchPrice.dive) from the root and then from the nodes reached while the dives
+#: so far have solved at most this share of the master LPs.
+DIVE_SHARE = 0.1
+#: A dive fixes to 0, with each step, the visits nearer to 0 than this (from 20 tasks up
+#: it is otherwise a step per visit: 8/20 seed 2's root dive took 135 s, then 58 s).
+DIVE_DROP = 0.1
 
 Arc3 = tuple[int, int, int]
 
@@ -156,7 +162,7 @@ class BranchPrice:
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None,
                  heuristic_round_columns: int = 120, dual_smoothing: float | None = None,
-                 master_mip_nodes: int = 0) -> None:
+                 master_mip_nodes: int = 0, dive_share: float | None = None) -> None:
         import highspy
 
         self.instance = instance
@@ -191,7 +197,9 @@ class BranchPrice:
         self.dual_smoothing = (dual_smoothing if dual_smoothing is not None else
                                SMOOTHING if len(self.tasks) >= SMOOTHING_FROM_TASKS else 0.0)
         self.master_mip_nodes = master_mip_nodes
+        self.dive_share = DIVE_SHARE if dive_share is None else dive_share
         self.threads = threads
+        self.lp_solves = 0  # master LPs solved (column generation, dives)
         self._heuristic_next = 0  # the AAV the next heuristic round starts with
         w1, w2, w3 = instance.weights
         self.constant = (instance.unserved_task_cost * (instance.n_tasks - len(self.tasks))
@@ -423,6 +431,7 @@ class BranchPrice:
         import highspy
 
         optimal = highspy.HighsModelStatus.kOptimal
+        self.lp_solves += 1
         self.h.setOptionValue("simplex_strategy", PRIMAL_SIMPLEX if primal else DUAL_SIMPLEX)
         self.h.run()
         if primal and self.h.getModelStatus() != optimal:
@@ -552,10 +561,12 @@ class BranchPrice:
 
     # --- column generation at one node ---------------------------------------------------
     def column_generation(self, restrictions: list[Restrictions], cutoff: float,
-                          deadline: float, clock: dict[str, float]
+                          deadline: float, clock: dict[str, float],
+                          heuristic_only: bool = False
                           ) -> tuple[float, float, np.ndarray, bool]:
         """(LP value, best Lagrangian bound, primal, converged). Stops early when the
-        bound reaches ``cutoff`` or at ``deadline``.
+        bound reaches ``cutoff`` or at ``deadline``; ``heuristic_only`` (a dive): once the
+        heuristic pricing finds nothing, with no bound.
 
         Pricing goes from cheap to exact: the heuristic labelling; when it finds nothing,
         the ng relaxation (``ng_size`` > 0), whose least reduced costs already give a
@@ -589,6 +600,9 @@ class BranchPrice:
                     center = duals
                 if added == 0:
                     added = self._heuristic_round(prices, restrictions, deadline)
+            if heuristic_only and (added == 0 or time.perf_counter() >= deadline):
+                clock["pricing"] += time.perf_counter() - began
+                return value, -math.inf, np.concatenate([x, np.zeros(self.n_cols - len(x))]), True
             least: list[float] | None = None  # per AAV: a lower bound on its least rc
             if added == 0 and self.ng_size:
                 least, added = self._price_round(prices, restrictions, range(n_aavs),
@@ -669,6 +683,59 @@ class BranchPrice:
         return added
 
     # --- reading plans off the LP --------------------------------------------------------
+    def dive(self, decisions: tuple[Decision, ...], x: np.ndarray, deadline: float,
+             clock: dict[str, float]) -> list[tuple[Route, ...]]:
+        """Diving (Sadykov, Lazarev, Shmonin, Uchoa, Vanderbeck and Yakovlev 2019): from a
+        node's LP solution, fix the fractional visit x_km nearest to 0 or 1 to that value
+        (and the visits nearer to 0 than DIVE_DROP to 0), re-run column generation with
+        heuristic pricing only, and repeat; once the visits are integral, go down the
+        branching rule's later steps (the earlier side of an arrival window, arcs and
+        amounts rounded) until the LP is integral or needs its artificial columns. Returns
+        the plans read off the way (each AAV's column of largest lambda, and the integral
+        LP's plan). The best-bound search reaches such deep plans late or never: on 8/20
+        seed 2 of benchmarks/exact_scaling.py the root's dive found J 6.907 where 600 s of
+        search had kept 11.699. The node's bounds are restored by the next ``apply``; the
+        columns priced on the way stay (columns like any other)."""
+        plans = []
+        while time.perf_counter() < deadline:
+            plans.append(self.rounded_plan(x))
+            fractional = [(min(v, 1.0 - v), key, v) for key, v in self.visits(x).items()
+                          if INTEGRALITY < v < 1.0 - INTEGRALITY]
+            if fractional:
+                # The visit nearest to 0 or 1 goes there, and with it every visit nearer
+                # to 0 than DIVE_DROP (a "0" side never empties the LP; several "1"s of an
+                # AAV could): from 20 tasks up a dive is otherwise a step per visit.
+                _, (k, m), v = min(fractional)
+                steps = [Decision("visit", k, m, "1" if v >= 0.5 else "0")]
+                steps += [Decision("visit", *key, "0") for _, key, w in fractional
+                          if w < DIVE_DROP and key != (k, m)]
+            else:
+                step = self.branching_candidates(x)
+                if not isinstance(step, Decision):
+                    plans.append(step)  # the LP is integral: this plan is its solution
+                    return plans
+                steps = [self._dive_side(step, x)]
+            decisions = (*decisions, *steps)
+            _, _, x, _ = self.column_generation(self.apply(decisions), math.inf, deadline,
+                                                clock, heuristic_only=True)
+            if self.artificial_value(x) > 1e-9:
+                break
+        return plans
+
+    def _dive_side(self, choice: Decision, x: np.ndarray) -> Decision:
+        """The side of a (non-visit) branching decision nearer to the LP solution: the
+        earlier side of an arrival window, an arc rounded to 0 or 1, an amount rounded."""
+        if choice.kind == "time":
+            return choice
+        cols = [c for c in self.columns if c.aav == choice.aav and x[c.index] > 1e-12]
+        if choice.kind == "arc":
+            flow = math.fsum(x[c.index] for c in cols if choice.key in c.arcs)
+            return Decision("arc", choice.aav, choice.key, "1" if flow >= 0.5 else "0")
+        amount = math.fsum(x[c.index] * c.free_amounts.get(choice.key, 0) for c in cols)
+        if amount - choice.value < 0.5:
+            return choice
+        return Decision("amount", choice.aav, choice.key, "ge", choice.value + 1)
+
     def integer_master_plan(self, cutoff: float, time_limit: float
                             ) -> tuple[Route, ...] | None:
         """A plan from the master with lambda integer over every column so far (HiGHS's
@@ -703,10 +770,18 @@ class BranchPrice:
                 best[col.aav] = (v, col)
         return tuple(best[n][1].route for n in range(self.instance.n_aavs))
 
+    def visits(self, x: np.ndarray) -> dict[tuple[int, int], float]:
+        """x_km: the lambda of AAV k's columns that visit task m (free part)."""
+        visit: dict[tuple[int, int], float] = {}
+        for col in self.columns:
+            if x[col.index] > 1e-12:
+                for m in col.free_amounts:
+                    visit[col.aav, m] = visit.get((col.aav, m), 0.0) + x[col.index]
+        return visit
+
     def branching_candidates(self, x: np.ndarray) -> Decision | tuple[Route, ...]:
         """The most fractional visit, then the widest spread arrival, then the most
         fractional arc, then amount; or the integral plan."""
-        visit: dict[tuple[int, int], float] = {}
         arc: dict[tuple[int, Arc3], float] = {}
         amount: dict[tuple[int, int], float] = {}
         arrivals: dict[tuple[int, int], list[tuple[float, float]]] = {}
@@ -715,13 +790,12 @@ class BranchPrice:
             if v <= 1e-12:
                 continue
             for m, a in col.free_amounts.items():
-                visit[col.aav, m] = visit.get((col.aav, m), 0.0) + v
                 amount[col.aav, m] = amount.get((col.aav, m), 0.0) + v * a
                 if m in col.theta:
                     arrivals.setdefault((col.aav, m), []).append((v, col.theta[m]))
             for e in col.arcs:
                 arc[col.aav, e] = arc.get((col.aav, e), 0.0) + v
-        frac = _most_fractional_first(visit)
+        frac = _most_fractional_first(self.visits(x))
         if frac:
             if self.strong_candidates > 1 and len(frac) > 1:
                 k, m = self.strongest(frac[:self.strong_candidates])
@@ -816,8 +890,9 @@ class BranchPrice:
               log: Callable[[str], None] | None = None) -> BranchPriceResult:
         began = time.perf_counter()
         deadline = math.inf if time_limit is None else began + time_limit
-        clock = {"lp": 0.0, "pricing": 0.0, "branching": 0.0, "master_mip": 0.0}
-        mip_improved = 0
+        clock = {"lp": 0.0, "pricing": 0.0, "branching": 0.0, "master_mip": 0.0,
+                 "dive": 0.0}
+        mip_improved = dive_improved = dives = dive_lps = 0
         instance = self.instance
         free = [len(p) for p in self.committed]
         best_routes = canonical_routes(instance, incumbent, free, self.plan_time)
@@ -894,6 +969,22 @@ class BranchPrice:
                 continue
             if self.artificial_value(x) > 1e-9:
                 continue  # infeasible node
+            # The dives' share is counted in master LPs, not seconds: the same search
+            # then dives from the same nodes on any machine (same seed, same result).
+            if self.dive_share and dive_lps <= self.dive_share * (self.lp_solves - dive_lps):
+                diving, solves = time.perf_counter(), self.lp_solves
+                saved = self.basis()
+                for plan in self.dive(decisions, x, deadline,
+                                      dict.fromkeys(("lp", "pricing"), 0.0)):
+                    dive_improved += offer(plan)[1]
+                self.apply(decisions)
+                self.restore_basis(saved)
+                _, x, _ = self.solve_lp()  # the node's LP again, for branching
+                dives += 1
+                dive_lps += self.lp_solves - solves
+                clock["dive"] += time.perf_counter() - diving
+                if node_bound >= best_J - tolerance(best_J):
+                    continue
             choosing = time.perf_counter()
             choice = self.branching_candidates(x)
             clock["branching"] += time.perf_counter() - choosing
@@ -937,6 +1028,9 @@ class BranchPrice:
             "branching_time": clock["branching"],
             "master_mip_time": clock["master_mip"],
             "master_mip_improvements": mip_improved,
+            "dive_time": clock["dive"],
+            "dives": dives,
+            "dive_improvements": dive_improved,
             "other_time": time.perf_counter() - began - sum(clock.values()),
             "wall_time": time.perf_counter() - began,
         }

@@ -180,6 +180,7 @@ class BranchPriceAllocator(Settings):
         heuristic_round_columns=Interval(int, 0, None),
         dual_smoothing=NoneOr(Interval(float, 0, 1, closed="left")),
         master_mip_nodes=Interval(int, 0, None),
+        dive_share=NoneOr(Interval(float, 0, 1, closed="both")),
         threads=Interval(int, 1, None),
     )
 
@@ -191,7 +192,7 @@ class BranchPriceAllocator(Settings):
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
                  dual_smoothing: float | None = None, master_mip_nodes: int = 0,
-                 threads: int = 1) -> None:
+                 dive_share: float | None = None, threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
         self.threads = threads
@@ -209,6 +210,7 @@ class BranchPriceAllocator(Settings):
         self.heuristic_round_columns = heuristic_round_columns
         self.dual_smoothing = dual_smoothing
         self.master_mip_nodes = master_mip_nodes
+        self.dive_share = dive_share
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -242,6 +244,7 @@ class BranchPriceAllocator(Settings):
                                  heuristic_round_columns=self.heuristic_round_columns,
                                  dual_smoothing=self.dual_smoothing,
                                  master_mip_nodes=self.master_mip_nodes,
+                                 dive_share=self.dive_share,
                                  threads=self.threads)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])

@@ -606,7 +606,7 @@ class BranchPrice:
                     added = self._heuristic_round(prices, restrictions, deadline)
             if heuristic_only and (added == 0 or time.perf_counter() >= deadline):
                 clock["pricing"] += time.perf_counter() - began
-                return value, -math.inf, np.concatenate([x, np.zeros(self.n_cols - len(x))]), True
+                return value, -math.inf, self._padded(x), True
             least: list[float] | None = None  # per AAV: a lower bound on its least rc
             if added == 0 and self.ng_size:
                 least, added = self._price_round(prices, restrictions, range(n_aavs),
@@ -622,8 +622,7 @@ class BranchPrice:
                 least_total = sum(min(0.0, v) for v in known)
                 bound = max(bound, value + least_total)
             clock["pricing"] += time.perf_counter() - began
-            # Columns added after this LP have lambda = 0 in its solution.
-            x = np.concatenate([x, np.zeros(self.n_cols - len(x))])
+            x = self._padded(x)
             if exact and -math.inf in exact_least:  # a cut-short pricing settles nothing
                 return value, bound, x, False
             if exact and added == 0:
@@ -636,6 +635,10 @@ class BranchPrice:
                 return value, bound, x, False
             if time.perf_counter() >= deadline:
                 return value, bound, x, False
+
+    def _padded(self, x: np.ndarray) -> np.ndarray:
+        """An LP solution with lambda = 0 for the columns added after that LP."""
+        return np.concatenate([x, np.zeros(self.n_cols - len(x))])
 
     def _heuristic_round(self, prices: list[TaskPrices], restrictions: list[Restrictions],
                          deadline: float) -> int:
@@ -687,8 +690,8 @@ class BranchPrice:
         return added
 
     # --- reading plans off the LP --------------------------------------------------------
-    def dive(self, decisions: tuple[Decision, ...], x: np.ndarray, deadline: float,
-             clock: dict[str, float]) -> list[tuple[Route, ...]]:
+    def dive(self, decisions: tuple[Decision, ...], x: np.ndarray, deadline: float
+             ) -> list[tuple[Route, ...]]:
         """Diving (Sadykov, Lazarev, Shmonin, Uchoa, Vanderbeck and Yakovlev 2019): from a
         node's LP solution, fix the fractional visit x_km nearest to 0 or 1 to that value
         (and the visits nearer to 0 than DIVE_DROP to 0), re-run column generation with
@@ -701,6 +704,7 @@ class BranchPrice:
         search had kept 11.699. The node's bounds are restored by the next ``apply``; the
         columns priced on the way stay (columns like any other)."""
         plans = []
+        clock = dict.fromkeys(("lp", "pricing"), 0.0)  # the caller times the dive whole
         while time.perf_counter() < deadline:
             plans.append(self.rounded_plan(x))
             fractional = [(min(v, 1.0 - v), key, v) for key, v in self.visits(x).items()
@@ -979,8 +983,7 @@ class BranchPrice:
             if self.dive_share and dive_lps <= self.dive_share * (self.lp_solves - dive_lps):
                 diving, solves = time.perf_counter(), self.lp_solves
                 saved = self.basis()
-                for plan in self.dive(decisions, x, deadline,
-                                      dict.fromkeys(("lp", "pricing"), 0.0)):
+                for plan in self.dive(decisions, x, deadline):
                     dive_improved += offer(plan)[1]
                 self.apply(decisions)
                 self.restore_basis(saved)
@@ -990,11 +993,11 @@ class BranchPrice:
                 clock["dive"] += time.perf_counter() - diving
                 if node_bound >= best_J - tolerance(best_J):
                     continue
-                if time.perf_counter() >= deadline:
-                    # A dive cut short: the node stays open rather than strong branching
-                    # past the limit (16/40 seed 2: 59 s over it).
-                    heapq.heappush(queue, (node_bound, next(counter), decisions, basis))
-                    continue
+            if time.perf_counter() >= deadline:
+                # The node stays open rather than strong branching past the limit (a dive
+                # cut short by it took 16/40 seed 2 to 659 s of 600).
+                heapq.heappush(queue, (node_bound, next(counter), decisions, basis))
+                continue
             choosing = time.perf_counter()
             choice = self.branching_candidates(x)
             clock["branching"] += time.perf_counter() - choosing

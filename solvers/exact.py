@@ -229,23 +229,12 @@ class BranchPriceAllocator(Settings):
         start = min(starts, key=evaluator.cost)
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start),
                                  "warm_start_time": time.perf_counter() - began}
+        # Every setting but the limit and the start is the search's own keyword.
+        search_settings = {key: value for key, value in self.settings().items()
+                           if key not in ("time_limit", "incumbent")}
         try:
             search = BranchPrice(instance, sorted(state.visible), state.committed, state.time,
-                                 heuristic_cap=self.heuristic_cap,
-                                 columns_per_aav=self.columns_per_aav,
-                                 closer_rows=self.closer_rows, cover_cuts=self.cover_cuts,
-                                 symmetry=self.symmetry,
-                                 strong_candidates=self.strong_candidates,
-                                 time_branching=self.time_branching,
-                                 goods_time_rows=self.goods_time_rows,
-                                 ng_size=self.ng_size,
-                                 ng_growth_rounds=self.ng_growth_rounds,
-                                 primal_resolves=self.primal_resolves,
-                                 heuristic_round_columns=self.heuristic_round_columns,
-                                 dual_smoothing=self.dual_smoothing,
-                                 master_mip_nodes=self.master_mip_nodes,
-                                 dive_share=self.dive_share,
-                                 threads=self.threads)
+                                 **search_settings)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
             return PlanResult(start, stats)

@@ -13,7 +13,9 @@ arrival term. Variables lambda_c >= 0, covered_m in [0, R_m], Ctime_m >= 0, nobo
        Ctime_m - sum_{c: m in S_c} theta_cm lambda_c - nobody_m >= 0
        Ctime_m - sum_{c of k} theta_cm lambda_c - nobody_m >= 0  (every member's arrival)
        sum_{n in S} coef_n x_nm - covered_m >= -rest  (coalition cover cuts, as in the MILP:
-                                                      x_nm = sum of n's columns visiting m).
+                                                      x_nm = sum of n's columns visiting m)
+       Ctime_m - nobody_m - sum_c coef_c lambda_c >= 0  (arrival cuts, separated:
+                                                      BranchPrice.separate_arrival_cuts).
 At a point with one column per AAV this is J exactly when the closer of each task is its
 latest member: covered = min(R, on-time goods); the per-AAV rows make Ctime at least the
 latest arrival, the closer no more; nobody = 1 exactly when no column closes m, which costs
@@ -43,6 +45,7 @@ and dives (BranchPrice.dive) from the root and some nodes.
 
 from __future__ import annotations
 
+import bisect
 import heapq
 import itertools
 import math
@@ -68,11 +71,18 @@ from tsac_bench.formulations.pricing import (
     Restrictions,
     TaskPrices,
     anchor_of,
+    arrival_cut_terms,
     schedule_route,
 )
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.planning import PlanningState
 
+#: Arrival cuts (``BranchPrice.separate_arrival_cuts``): a cut is added where it is violated by
+#: more than this (in units of C_time), and a node runs at most ``arrival_cut_rounds`` rounds.
+ARRIVAL_CUT_VIOLATION = 1e-4
+ARRIVAL_CUT_ROUNDS = 5
+#: The sources of an arrival cut's piece besides an AAV (>= 0): the closers, the goods.
+CLOSERS, GOODS = -1, -2
 #: Reduced costs above -this count as non-negative (column generation has converged).
 RC_TOLERANCE = 1e-9
 #: A node is pruned when its bound is within this (relative) of the incumbent.
@@ -166,7 +176,8 @@ class BranchPrice:
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None,
                  heuristic_round_columns: int = 120, dual_smoothing: float | None = None,
-                 master_mip_nodes: int = 0, dive_share: float | None = None) -> None:
+                 master_mip_nodes: int = 0, dive_share: float | None = None,
+                 arrival_cut_rounds: int | None = None) -> None:
         import highspy
 
         self.instance = instance
@@ -202,6 +213,8 @@ class BranchPrice:
                                SMOOTHING if len(self.tasks) >= SMOOTHING_FROM_TASKS else 0.0)
         self.master_mip_nodes = master_mip_nodes
         self.dive_share = DIVE_SHARE if dive_share is None else dive_share
+        self.arrival_cut_rounds = (ARRIVAL_CUT_ROUNDS if arrival_cut_rounds is None
+                                   else arrival_cut_rounds)
         self.threads = threads
         self.lp_solves = 0  # master LPs solved (column generation, strong branching, dives)
         self._heuristic_next = 0  # the AAV the next heuristic round starts with
@@ -244,7 +257,7 @@ class BranchPrice:
         # no committed visit has served yet.
         self.goods_time = {m: self._row(0.0, self.inf) for m in self.timed
                            if m not in in_prefix} if goods_time_rows else {}
-        self.covered = {}
+        self.covered, self.ctime, self.nobody = {}, {}, {}
         for m in self.tasks:
             demand = instance.tasks[m].demand
             self.covered[m] = self._col(-w1 / demand, 0.0, demand, [(self.cover[m], -1.0)])
@@ -253,10 +266,12 @@ class BranchPrice:
                                                      self.aav_time.items() if j == m]
             if m in self.goods_time:
                 ctime.append((self.goods_time[m], float(instance.tasks[m].demand)))
-            self._col(w2, 0.0, self.inf, ctime)
+            self.ctime[m] = self._col(w2, 0.0, self.inf, ctime)
             nobody = [(self.closer[m], 1.0), (self.closer_time[m], -1.0)] + [
                 (r, -1.0) for (k, j), r in self.aav_time.items() if j == m]
-            self._col(0.0, 0.0, 1.0, nobody)
+            self.nobody[m] = self._col(0.0, 0.0, 1.0, nobody)
+        # Arrival cuts (separate_arrival_cuts) per task: (row, pieces (lo, hi, source)).
+        self.arrival_cuts: dict[int, list[tuple[int, tuple[tuple[float, float, int], ...]]]] = {}
         # Coalition cover cuts (network.coalition_cover_cuts): (row, task, {AAV: coef}).
         self.cuts: list[tuple[int, int, dict[int, int]]] = []
         if cover_cuts:
@@ -290,6 +305,8 @@ class BranchPrice:
         full = sum(a.full_range_cost / instance.e_base for a in instance.aavs)
         self.big = 10.0 * (self.constant + len(self.tasks) * (w1 + w2 + w3 * full)) + 100.0
         self.columns: list[Column] = []
+        self.column_at: dict[int, Column] = {}  # by LP column
+        self.arriving: dict[int, list[Column]] = {}  # by timed task visited on time
         self.by_key: dict[tuple[int, tuple[Visit, ...], frozenset[int]], Column] = {}
         self.robust: dict[tuple, tuple[int, int]] = {}  # decision key -> (row, artificial)
         # Arrival-window branching's "later than" sides: (AAV, task, threshold) -> the row
@@ -376,9 +393,17 @@ class BranchPrice:
                 entries.append((row, -1.0))
         for m in col.closes:
             entries += [(self.closer[m], 1.0), (self.closer_time[m], -col.theta[m])]
+        for m in col.theta:
+            for row, pieces in self.arrival_cuts.get(m, ()):
+                coef = self._arrival_cut_coef(col, m, pieces)
+                if coef:
+                    entries.append((row, -coef))
         col.index = self._col(col.op, 0.0, self.inf, entries)
         self.columns.append(col)
+        self.column_at[col.index] = col
         self.columns_of[n].append(col.index)
+        for m in col.theta:
+            self.arriving.setdefault(m, []).append(col)
         for m in col.free_amounts:
             self.visiting.setdefault((n, m), []).append(col)
         for arc in col.arcs:
@@ -504,6 +529,113 @@ class BranchPrice:
         self.closed = closed
         return restrictions
 
+    # --- arrival cuts ----------------------------------------------------------------------
+    def _arrival_cut_coef(self, col: Column, m: int,
+                          pieces: Sequence[tuple[float, float, int]]) -> float:
+        """The column's coefficient in an arrival cut of task m: the part of [0, theta_cm)
+        that the pieces of its own AAV, of the closers (when it closes m) and of the goods
+        (weighed by its share a_cm / R_m) cover."""
+        theta = col.theta.get(m)
+        if theta is None:
+            return 0.0
+        share = col.amounts[m] / self.instance.tasks[m].demand
+        coef = 0.0
+        for lo, hi, source in pieces:
+            if theta > lo and (source == col.aav or source == GOODS
+                               or (source == CLOSERS and m in col.closes)):
+                coef += (min(theta, hi) - lo) * (share if source == GOODS else 1.0)
+        return coef
+
+    def _arrival_pieces(self, n: int, m: int,
+                        cuts: Sequence[tuple[int, tuple[tuple[float, float, int], ...]]],
+                        duals: np.ndarray) -> list[tuple[float, float, float, float, float]]:
+        """Task m's arrival cuts as AAV n's pricing sees them: their duals summed into
+        disjoint pieces (lo, hi, aav, closer, goods per kg), so that a label pays per visit
+        for a few pieces rather than for every piece of every cut."""
+        per_kg = 1.0 / self.instance.tasks[m].demand
+        weighted = []
+        for row, pieces in cuts:
+            dual = duals[row]
+            if dual == 0.0:
+                continue
+            for lo, hi, source in pieces:
+                if source == n:
+                    weighted.append((lo, hi, (dual, 0.0, 0.0)))
+                elif source == CLOSERS:
+                    weighted.append((lo, hi, (0.0, dual, 0.0)))
+                elif source == GOODS:
+                    weighted.append((lo, hi, (0.0, 0.0, dual * per_kg)))
+        breaks = sorted({b for lo, hi, _ in weighted for b in (lo, hi)})
+        sums = np.zeros((max(len(breaks) - 1, 0), 3))
+        for lo, hi, weights in weighted:
+            sums[bisect.bisect_left(breaks, lo):bisect.bisect_left(breaks, hi)] += weights
+        return [(lo, hi, *map(float, w)) for (lo, hi), w in
+                zip(itertools.pairwise(breaks), sums, strict=True) if w.any()]
+
+    def separate_arrival_cuts(self, x: np.ndarray) -> int:
+        """Add the most violated arrival cut of every timed task whose LP point violates
+        one; the number added.
+
+        In a plan C_time = max over the members of their arrival terms, so for every tau
+        the indicator [C_time > tau] is at least [theta_k > tau] for each AAV k, and
+        C_time = the integral of that indicator over tau in [0, 1]. In the LP each AAV's
+        columns give P_k(tau) = sum of lambda over its columns arriving later than tau,
+        and the per-AAV time rows integrate one P_k each; integrating max_k P_k(tau)
+        instead is the strongest bound on the latest member that these marginals give (a
+        comonotone coupling attains it). Two more sources join the max, each as valid as
+        its own row: the closers (sum of lambda over the columns that close m, arriving
+        later than tau: one closer, the latest member, in a plan) and the goods (the share
+        of R_m arriving later than tau: the goods-time row's argument, only on the tasks
+        that row has). A cut is the row
+            Ctime_m - nobody_m - sum_c coef_c lambda_c >= 0,
+        one source per piece of [0, 1] (lo, hi, source), coef_c the length of [0, theta_cm)
+        under the pieces of c's sources; its dual prices an arrival by a non-decreasing
+        piecewise linear function (TaskPrices.arrival_cuts)."""
+        added = 0
+        positive = [self.column_at[j] for j in np.flatnonzero(x > INTEGRALITY)
+                    if j in self.column_at]
+        for m in sorted(self.timed):
+            demand = self.instance.tasks[m].demand
+            later: list[tuple[float, int, float]] = []  # (theta, source, weight)
+            for col in positive:
+                lam = x[col.index]
+                theta = col.theta.get(m)
+                if theta is None or theta <= 0.0:
+                    continue
+                later.append((theta, col.aav, lam))
+                if m in self.goods_time:
+                    later.append((theta, GOODS, lam * col.amounts[m] / demand))
+                if m in col.closes:
+                    later.append((theta, CLOSERS, lam))
+            breaks = sorted({0.0, *(theta for theta, _, _ in later)})
+            pieces: list[tuple[float, float, int]] = []
+            total = 0.0
+            for lo, hi in itertools.pairwise(breaks):
+                mass: dict[int, float] = {}
+                for theta, source, weight in later:
+                    if theta > lo:
+                        mass[source] = mass.get(source, 0.0) + weight
+                source = max(sorted(mass), key=mass.__getitem__)
+                total += mass[source] * (hi - lo)
+                if pieces and pieces[-1][2] == source and pieces[-1][1] == lo:
+                    pieces[-1] = (pieces[-1][0], hi, source)
+                else:
+                    pieces.append((lo, hi, source))
+            if total + x[self.nobody[m]] - x[self.ctime[m]] <= ARRIVAL_CUT_VIOLATION:
+                continue
+            entries = [(self.ctime[m], 1.0), (self.nobody[m], -1.0)]
+            for col in self.arriving.get(m, ()):
+                coef = self._arrival_cut_coef(col, m, pieces)
+                if coef:
+                    entries.append((col.index, -coef))
+            self.h.addRow(0.0, self.inf, len(entries), np.array([j for j, _ in entries],
+                                                                np.int32),
+                          np.array([v for _, v in entries]))
+            self.n_rows += 1
+            self.arrival_cuts.setdefault(m, []).append((self.n_rows - 1, tuple(pieces)))
+            added += 1
+        return added
+
     def artificial_value(self, x: np.ndarray) -> float:
         return sum(x[a] for _, a in self.robust.values())
 
@@ -534,9 +666,12 @@ class BranchPrice:
         for (k, m, threshold), row in self.early.items():
             if k == n and duals[row] < 0.0:  # a <= row: its dual is <= 0
                 early_penalty.setdefault(m, []).append((threshold, -duals[row]))
+        arrival_cuts = {m: self._arrival_pieces(n, m, cuts, duals)
+                        for m, cuts in self.arrival_cuts.items()}
         prices = TaskPrices(0.0, cover, aav_time, closer, closer_time,
                             visit_bonus=visit_bonus, arc_bonus=arc_bonus, cut_bonus=cut_bonus,
-                            goods_time=goods_time, early_penalty=early_penalty)
+                            goods_time=goods_time, early_penalty=early_penalty,
+                            arrival_cuts=arrival_cuts)
         prices.base = self.reduced_cost(self.make_column(n, ()), prices) - duals[self.conv[n]]
         return prices
 
@@ -544,7 +679,14 @@ class BranchPrice:
     def best_closes(col: Column, prices: TaskPrices) -> frozenset[int]:
         """The tasks whose closing lowers this schedule's reduced cost."""
         return frozenset(m for m, t in col.theta.items()
-                         if prices.closer_time.get(m, 0.0) * t - prices.closer.get(m, 0.0) < 0)
+                         if BranchPrice._closing_term(m, t, prices) < 0)
+
+    @staticmethod
+    def _closing_term(m: int, theta: float, prices: TaskPrices) -> float:
+        """What closing task m at arrival term ``theta`` adds to a reduced cost (the
+        labelling takes its min with 0)."""
+        cut = arrival_cut_terms(prices.arrival_cuts.get(m, ()), theta)[1]
+        return prices.closer_time.get(m, 0.0) * theta + cut - prices.closer.get(m, 0.0)
 
     @classmethod
     def reduced_cost(cls, col: Column, prices: TaskPrices) -> float:
@@ -552,10 +694,11 @@ class BranchPrice:
         convexity dual."""
         rc = col.op - math.fsum(prices.cover.get(m, 0.0) * a for m, a in col.amounts.items())
         for m, t in col.theta.items():
-            rc += prices.aav_time.get(m, 0.0) * t
-            rc += prices.goods_time.get(m, 0.0) * t * col.amounts[m]
+            cut_aav, _, cut_goods = arrival_cut_terms(prices.arrival_cuts.get(m, ()), t)
+            rc += prices.aav_time.get(m, 0.0) * t + cut_aav
+            rc += (prices.goods_time.get(m, 0.0) * t + cut_goods) * col.amounts[m]
         for m in cls.best_closes(col, prices):
-            rc += prices.closer_time.get(m, 0.0) * col.theta[m] - prices.closer.get(m, 0.0)
+            rc += cls._closing_term(m, col.theta[m], prices)
         rc -= sum(prices.visit_bonus.get(m, 0.0) for m in col.free_amounts)
         rc -= sum(prices.cut_bonus.get(m, 0.0) for m in col.amounts)
         rc -= sum(prices.arc_bonus.get(a, 0.0) for a in col.arcs)
@@ -635,6 +778,28 @@ class BranchPrice:
                 return value, bound, x, False
             if time.perf_counter() >= deadline:
                 return value, bound, x, False
+
+    def cut_and_price(self, restrictions: list[Restrictions], cutoff: float,
+                      deadline: float, clock: dict[str, float]
+                      ) -> tuple[float, float, np.ndarray, bool]:
+        """A node's column generation, then up to ``arrival_cut_rounds`` rounds of arrival
+        cuts, each followed by column generation again, while cuts are violated; the same
+        (LP value, bound, primal, converged) as column_generation, the bound the best of
+        the rounds (each is valid)."""
+        value, bound, x, converged = self.column_generation(restrictions, cutoff, deadline,
+                                                            clock)
+        for _ in range(self.arrival_cut_rounds):
+            if not converged or bound >= cutoff - PRUNE_TOLERANCE * max(1.0, abs(cutoff)):
+                break
+            separating = time.perf_counter()
+            added = self.separate_arrival_cuts(x)
+            clock["cuts"] += time.perf_counter() - separating
+            if not added:
+                break
+            value, later, x, converged = self.column_generation(restrictions, cutoff,
+                                                                deadline, clock)
+            bound = max(bound, later)
+        return value, bound, x, converged
 
     def _padded(self, x: np.ndarray) -> np.ndarray:
         """An LP solution with lambda = 0 for the columns added after that LP."""
@@ -887,9 +1052,9 @@ class BranchPrice:
         the Lagrangian bound, whether it converged, columns and seconds."""
         began = time.perf_counter()
         deadline = math.inf if time_limit is None else began + time_limit
-        clock = {"lp": 0.0, "pricing": 0.0}
-        value, bound, _, converged = self.column_generation(self.apply(()), math.inf,
-                                                            deadline, clock)
+        clock = {"lp": 0.0, "pricing": 0.0, "cuts": 0.0}
+        value, bound, _, converged = self.cut_and_price(self.apply(()), math.inf, deadline,
+                                                        clock)
         return {"lp": value, "bound": bound if not converged else value,
                 "converged": converged, "columns": len(self.columns),
                 "seconds": time.perf_counter() - began}
@@ -899,8 +1064,8 @@ class BranchPrice:
               log: Callable[[str], None] | None = None) -> BranchPriceResult:
         began = time.perf_counter()
         deadline = math.inf if time_limit is None else began + time_limit
-        clock = {"lp": 0.0, "pricing": 0.0, "branching": 0.0, "master_mip": 0.0,
-                 "dive": 0.0}
+        clock = {"lp": 0.0, "pricing": 0.0, "cuts": 0.0, "branching": 0.0,
+                 "master_mip": 0.0, "dive": 0.0}
         mip_improved = dive_improved = dives = dive_lps = 0
         instance = self.instance
         free = [len(p) for p in self.committed]
@@ -965,8 +1130,8 @@ class BranchPrice:
             nodes += 1
             restrictions = self.apply(decisions)
             self.restore_basis(basis)
-            value, node_bound, x, converged = self.column_generation(
-                restrictions, best_J, deadline, clock)
+            value, node_bound, x, converged = self.cut_and_price(restrictions, best_J,
+                                                                 deadline, clock)
             node_bound = max(node_bound, bound)
             if root_bound is None:
                 root_bound = node_bound
@@ -1038,6 +1203,8 @@ class BranchPrice:
             "columns": len(self.columns),
             "lp_time": clock["lp"],
             "pricing_time": clock["pricing"],
+            "arrival_cuts": sum(map(len, self.arrival_cuts.values())),
+            "cut_time": clock["cuts"],
             "branching_time": clock["branching"],
             "master_mip_time": clock["master_mip"],
             "master_mip_improvements": mip_improved,

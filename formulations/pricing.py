@@ -67,7 +67,11 @@ class TaskPrices:
     each arc adds -arc_bonus[(tail, head, mode)]. goods_time[m] >= 0, so the price per kg
     falls with the arrival: an earlier clock is never worse, except for ``early_penalty``
     (arrival-window branching's "later than" side): a visit to m whose theta is <= a
-    threshold pays that threshold's penalty (>= 0), summed over m's thresholds."""
+    threshold pays that threshold's penalty (>= 0), summed over m's thresholds.
+    ``arrival_cuts[m]`` lists pieces (lo, hi, aav, closer, goods) of the arrival cuts' duals
+    (>= 0): with g = min(max(theta - lo, 0), hi - lo), a piece adds aav * g to the visit's
+    cost, closer * g inside the closing term's min, and takes goods * g off the price per
+    kg; all three are non-decreasing in the arrival, so they leave the dominance as it is."""
 
     base: float  # reduced cost of the empty schedule (prefix only): -convexity dual + prefix
     cover: dict[int, float]
@@ -79,6 +83,22 @@ class TaskPrices:
     arc_bonus: dict[tuple[int, int, int], float] = field(default_factory=dict)
     goods_time: dict[int, float] = field(default_factory=dict)  # goods-weighted arrival rows
     early_penalty: dict[int, list[tuple[float, float]]] = field(default_factory=dict)
+    arrival_cuts: dict[int, list[tuple[float, float, float, float, float]]] = field(
+        default_factory=dict)
+
+
+def arrival_cut_terms(pieces: Sequence[tuple[float, float, float, float, float]],
+                      theta: float) -> tuple[float, float, float]:
+    """The (aav, closer, goods per kg) price terms of ``TaskPrices.arrival_cuts`` pieces at
+    arrival term ``theta``, in the labelling's order of float operations."""
+    aav = closer = goods = 0.0
+    for lo, hi, w_aav, w_closer, w_goods in pieces:
+        if theta > lo:
+            g = min(theta, hi) - lo
+            aav += w_aav * g
+            closer += w_closer * g
+            goods += w_goods * g
+    return aav, closer, goods
 
 
 @dataclass
@@ -265,6 +285,12 @@ class Pricer:
             for q, (threshold, penalty) in enumerate(steps):
                 early_theta[m, q], early_penalty[m, q] = threshold, penalty
         penalised = sorted(prices.early_penalty)
+        slots = max((len(v) for v in prices.arrival_cuts.values()), default=0)
+        pieces = np.zeros((5, n_tasks, max(slots, 1)))
+        pieces[0] = np.inf  # an unused slot starts past every arrival
+        for m, steps in prices.arrival_cuts.items():
+            for q, piece in enumerate(steps):
+                pieces[:, m, q] = piece
         theta_high = per_task(restrictions.arrival_high, np.inf)
         root = np.full((size, size), np.inf)
         root[self.anchor.peak:, self.anchor.pickup:] = prices.base
@@ -273,7 +299,7 @@ class Pricer:
             per_task(prices.closer_time), per_task(prices.goods_time),
             per_task(prices.visit_bonus),
             per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
-            theta_high, early_theta, early_penalty, np.array(penalised, np.int64))
+            theta_high, early_theta, early_penalty, np.array(penalised, np.int64), pieces)
         best = -math.inf
         chosen: list[Schedule] = []
         for _ in range(1 + (growth_rounds if relaxed else 0)):
@@ -476,6 +502,19 @@ def _early_cost(early_theta, early_penalty, j, theta):
 
 
 @njit(cache=True)
+def _arrival_cut_terms(pieces, j, theta):
+    """``arrival_cut_terms`` of task j's pieces (rows lo, hi, aav, closer, goods)."""
+    aav = closer = goods = 0.0
+    for q in range(pieces.shape[2]):
+        if theta > pieces[0, j, q]:
+            g = min(theta, pieces[1, j, q]) - pieces[0, j, q]
+            aav += pieces[2, j, q] * g
+            closer += pieces[3, j, q] * g
+            goods += pieces[4, j, q] * g
+    return aav, closer, goods
+
+
+@njit(cache=True)
 def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone,
                penalised, early_theta, early_penalty, t_start, t_end, horizon, reach,
                elementary):
@@ -526,7 +565,7 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                cover, aav_time, closer, closer_time, goods_time, visit_bonus, cut_bonus,
                arc_bonus,
                forbidden_task, forbidden_arc, amount_low, amount_high, theta_high,
-               early_theta, early_penalty, penalised, reach, ng_memory, elementary,
+               early_theta, early_penalty, penalised, pieces, reach, ng_memory, elementary,
                label_cap, deadline):
     """Every undominated label from the anchor, extended path length by path length (with
     ``label_cap`` > 0 only the cheapest that many per node and length go on).
@@ -616,8 +655,11 @@ def _labelling(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                         continue
                     c += _early_cost(early_theta, early_penalty, j, theta)
                     c += aav_time[j] * theta
-                    c += min(0.0, closer_time[j] * theta - closer[j])
+                    cut_aav, cut_closer, cut_goods = _arrival_cut_terms(pieces, j, theta)
+                    c += cut_aav
+                    c += min(0.0, closer_time[j] * theta + cut_closer - closer[j])
                     p -= goods_time[j] * theta
+                    p -= cut_goods
                 a_low = amount_low[j]
                 a_high = min(demand[j], capacity, amount_high[j])
                 # With no value on goods, more than the least amount only uses capacity.

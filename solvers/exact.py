@@ -181,6 +181,7 @@ class BranchPriceAllocator(Settings):
         dual_smoothing=NoneOr(Interval(float, 0, 1, closed="left")),
         master_mip_nodes=Interval(int, 0, None),
         dive_share=NoneOr(Interval(float, 0, 1, closed="both")),
+        arrival_cut_rounds=NoneOr(Interval(int, 0, None)),
         threads=Interval(int, 1, None),
     )
 
@@ -192,7 +193,8 @@ class BranchPriceAllocator(Settings):
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
                  dual_smoothing: float | None = None, master_mip_nodes: int = 0,
-                 dive_share: float | None = None, threads: int = 1) -> None:
+                 dive_share: float | None = None, arrival_cut_rounds: int | None = None,
+                 threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
         self.threads = threads
@@ -211,6 +213,7 @@ class BranchPriceAllocator(Settings):
         self.dual_smoothing = dual_smoothing
         self.master_mip_nodes = master_mip_nodes
         self.dive_share = dive_share
+        self.arrival_cut_rounds = arrival_cut_rounds
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:

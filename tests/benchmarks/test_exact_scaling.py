@@ -60,6 +60,8 @@ def test_the_time_split_sums_each_part_over_the_instances_of_a_size() -> None:
                 branching_time=10.0, other_time=10.0, nodes=10, columns=100),
             row("4/10", 2, "exact-bp", 10.0, 8.0, 7.0, pricing_time=250.0, lp_time=50.0,
                 branching_time=0.0, dive_time=100.0, other_time=0.0, nodes=30, columns=300)]
-    # pricing 300 of 500 s, LP 80, branching 10, dives 100 (the first run has none), other 10.
+    rows[1]["pricing_time"], rows[1]["cut_time"] = 150.0, 100.0
+    # pricing 200 of 500 s, LP 80, cuts 100 and dives 100 (the first run has neither),
+    # branching 10, other 10.
     assert exact_scaling.time_split_table(rows, ["4/10"]).splitlines()[2] == \
-        "| 4/10 | 60 % | 16 % | 2 % | 20 % | 2 % | 20 | 200 |"
+        "| 4/10 | 40 % | 16 % | 20 % | 2 % | 20 % | 2 % | 20 | 200 |"

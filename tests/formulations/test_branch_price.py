@@ -4,6 +4,7 @@ the proven regression optima, full enumeration of schedules, and the MILP in dyn
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 import random
@@ -89,8 +90,10 @@ def test_exact_bp_reproduces_every_manifest_optimum(name: str) -> None:
     _regression(name)
 
 
-def _random_prices(search: BranchPrice, n: int, rng: random.Random) -> TaskPrices:
-    """Duals of the signs the LP gives (>= 0 on every >= row), random magnitudes."""
+def _random_prices(search: BranchPrice, n: int, rng: random.Random,
+                   arrival_cuts: bool = False) -> TaskPrices:
+    """Duals of the signs the LP gives (>= 0 on every >= row), random magnitudes; with
+    ``arrival_cuts``, random pieces of arrival cuts on some tasks too."""
     tasks = search.tasks
     prices = TaskPrices(
         base=-rng.uniform(0, 2),
@@ -104,6 +107,13 @@ def _random_prices(search: BranchPrice, n: int, rng: random.Random) -> TaskPrice
         cut_bonus={m: rng.uniform(0, 2) for m in tasks if rng.random() < 0.5},
         arc_bonus={(a.tail, a.head, a.mode): rng.uniform(0, 1)
                    for a in search.pricers[n].network.arcs if rng.random() < 0.3})
+    if arrival_cuts:
+        for m in tasks:
+            breaks = sorted(rng.uniform(0, 0.4) for _ in range(rng.choice([0, 2, 4])))
+            prices.arrival_cuts[m] = [
+                (lo, hi, rng.choice([0.0, rng.uniform(0, 5)]),
+                 rng.choice([0.0, rng.uniform(0, 5)]), rng.choice([0.0, rng.uniform(0, 3)]))
+                for lo, hi in itertools.pairwise(breaks)]
     return prices
 
 
@@ -119,7 +129,7 @@ def _pricing_matches_every_schedule(search: BranchPrice, rng: random.Random) -> 
                 prices = search.prices(n, duals)
                 conv = duals[search.conv[n]]
             else:
-                prices = _random_prices(search, n, rng)
+                prices = _random_prices(search, n, rng, arrival_cuts=True)
                 conv = -prices.base
                 # The labelling starts from the prefix's own terms, as search.prices does.
                 prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
@@ -556,6 +566,47 @@ def test_pricing_in_the_simulators_states_finds_the_least_reduced_cost(seed: int
     assert checked >= 4
 
 
+def test_arrival_cuts_lift_the_root_and_stay_below_the_brute_force_optimum() -> None:
+    # 2 AAVs x 4 tasks (the dive test's instances): the root LP with the arrival cuts is
+    # never above J*, and above the root LP without them on these ten.
+    lifted = []
+    for seed in range(16):
+        instance = tiny_instance(500 + seed, n_aavs=2, n_tasks=4, max_demand=5)
+        J_brute, _ = brute_force(instance)
+        plain = BranchPrice(instance, arrival_cut_rounds=0).root()
+        cut = BranchPrice(instance).root()
+        assert plain["converged"] and cut["converged"]
+        assert plain["lp"] - 1e-9 <= cut["lp"] <= J_brute + 1e-9
+        if cut["lp"] > plain["lp"] + 1e-6:
+            lifted.append(seed)
+    assert lifted == [0, 2, 3, 4, 9, 10, 11, 13, 14, 15]
+
+
+def test_arrival_cut_duals_price_every_column_as_the_lp_does() -> None:
+    # The chain master row -> duals -> merged pieces -> reduced cost, checked against
+    # HiGHS's own reduced costs: equal for a column with its best closing set, no lower
+    # for any other closing set.
+    # Instance 510: cuts with every kind of piece (an AAV's, the closers', the goods') have
+    # non-zero duals.
+    instance = tiny_instance(510, n_aavs=2, n_tasks=4, max_demand=5)
+    search = BranchPrice(instance)
+    search.root()
+    _, _, duals = search.solve_lp()
+    assert {source for cuts in search.arrival_cuts.values() for row, pieces in cuts
+            if duals[row] > 1e-9 for _, _, source in pieces} == {-2, -1, 0, 1}
+    lp_reduced = search.h.getSolution().col_dual
+    best_closing = 0
+    for col in search.columns:
+        prices = search.prices(col.aav, duals)
+        ours = search.reduced_cost(col, prices) - duals[search.conv[col.aav]]
+        if col.closes == search.best_closes(col, prices):
+            assert lp_reduced[col.index] == pytest.approx(ours, abs=1e-9)
+            best_closing += 1
+        else:
+            assert lp_reduced[col.index] >= ours - 1e-9
+    assert best_closing >= 50
+
+
 @pytest.mark.parametrize(("name", "without", "with_rows"), [
     # (instance, root without the goods-time rows, root with them), % of J*
     # (reports/exact-bp-root.md).
@@ -566,8 +617,8 @@ def test_goods_time_rows_lift_the_root_and_stay_below_the_optimum(
         name: str, without: float, with_rows: float) -> None:
     instance = read_instance(REGRESSION / MANIFEST[name]["file"])
     J_star = MANIFEST[name]["J_star"]
-    plain = BranchPrice(instance, goods_time_rows=False).root()
-    lifted = BranchPrice(instance).root()
+    plain = BranchPrice(instance, goods_time_rows=False, arrival_cut_rounds=0).root()
+    lifted = BranchPrice(instance, arrival_cut_rounds=0).root()
     assert plain["converged"] and lifted["converged"]
     assert 100 * plain["lp"] / J_star == pytest.approx(without, abs=0.05)
     assert 100 * lifted["lp"] / J_star == pytest.approx(with_rows, abs=0.05)

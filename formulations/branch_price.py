@@ -80,7 +80,7 @@ from tsac_bench.planning import PlanningState
 #: Arrival cuts (``BranchPrice.separate_arrival_cuts``): a cut is added where it is violated by
 #: more than this (in units of C_time), and a node runs at most ``arrival_cut_rounds`` rounds.
 ARRIVAL_CUT_VIOLATION = 1e-4
-ARRIVAL_CUT_ROUNDS = 5
+ARRIVAL_CUT_ROUNDS = 2
 #: The sources of an arrival cut's piece besides an AAV (>= 0): the closers, the goods.
 CLOSERS, GOODS = -1, -2
 #: Reduced costs above -this count as non-negative (column generation has converged).

@@ -324,8 +324,11 @@ class BranchPrice:
             self.add_column(n, ())
 
     # --- LP plumbing ---------------------------------------------------------------------
-    def _row(self, lower: float, upper: float) -> int:
-        self.h.addRow(lower, upper, 0, np.zeros(0, np.int32), np.zeros(0))
+    def _row(self, lower: float, upper: float,
+             entries: Sequence[tuple[int, float]] = ()) -> int:
+        columns = np.array([j for j, _ in entries], np.int32)
+        values = np.array([v for _, v in entries], float)
+        self.h.addRow(lower, upper, len(entries), columns, values)
         self.n_rows += 1
         return self.n_rows - 1
 
@@ -628,11 +631,8 @@ class BranchPrice:
                 coef = self._arrival_cut_coef(col, m, pieces)
                 if coef:
                     entries.append((col.index, -coef))
-            self.h.addRow(0.0, self.inf, len(entries), np.array([j for j, _ in entries],
-                                                                np.int32),
-                          np.array([v for _, v in entries]))
-            self.n_rows += 1
-            self.arrival_cuts.setdefault(m, []).append((self.n_rows - 1, tuple(pieces)))
+            row = self._row(0.0, self.inf, entries)
+            self.arrival_cuts.setdefault(m, []).append((row, tuple(pieces)))
             added += 1
         return added
 
@@ -774,7 +774,7 @@ class BranchPrice:
                 # between the labelling and HiGHS), where only the Lagrangian bound is sure.
                 settled = least_total >= -tolerance
                 return value, max(bound, value) if settled else bound, x, True
-            if bound >= cutoff - PRUNE_TOLERANCE * max(1.0, abs(cutoff)):
+            if _reaches(bound, cutoff):
                 return value, bound, x, False
             if time.perf_counter() >= deadline:
                 return value, bound, x, False
@@ -789,7 +789,7 @@ class BranchPrice:
         value, bound, x, converged = self.column_generation(restrictions, cutoff, deadline,
                                                             clock)
         for _ in range(self.arrival_cut_rounds):
-            if not converged or bound >= cutoff - PRUNE_TOLERANCE * max(1.0, abs(cutoff)):
+            if not converged or _reaches(bound, cutoff):
                 break
             separating = time.perf_counter()
             added = self.separate_arrival_cuts(x)
@@ -1093,14 +1093,11 @@ class BranchPrice:
         status = "optimal"
         stop_reason = "optimal"
 
-        def tolerance(J: float) -> float:
-            return PRUNE_TOLERANCE * max(1.0, abs(J))
-
         def offer(plan: tuple[Route, ...]) -> tuple[float, bool]:
             """The plan's J, and whether it replaced the incumbent."""
             nonlocal best_J, best_routes
             J = self.evaluator.cost(plan)
-            if best_J - tolerance(best_J) > J:
+            if not _reaches(J, best_J):
                 best_J, best_routes = J, plan
                 return J, True
             return J, False
@@ -1108,7 +1105,7 @@ class BranchPrice:
         mip_columns = 0  # the columns at the integer master's last run (0: not yet run)
         while queue:
             bound, _, decisions, basis = heapq.heappop(queue)
-            if bound >= best_J - tolerance(best_J):
+            if _reaches(bound, best_J):
                 continue
             if time.perf_counter() >= deadline:
                 heapq.heappush(queue, (bound, next(counter), decisions, basis))
@@ -1125,7 +1122,7 @@ class BranchPrice:
                 clock["master_mip"] += time.perf_counter() - solving
                 if plan is not None:
                     mip_improved += offer(plan)[1]
-                if bound >= best_J - tolerance(best_J):
+                if _reaches(bound, best_J):
                     continue
             nodes += 1
             restrictions = self.apply(decisions)
@@ -1136,7 +1133,7 @@ class BranchPrice:
             if root_bound is None:
                 root_bound = node_bound
             offer(self.rounded_plan(x))
-            if node_bound >= best_J - tolerance(best_J):
+            if _reaches(node_bound, best_J):
                 continue
             if not converged:  # the deadline: keep the node open with its bound
                 heapq.heappush(queue, (node_bound, next(counter), decisions, basis))
@@ -1156,7 +1153,7 @@ class BranchPrice:
                 dives += 1
                 dive_lps += self.lp_solves - solves
                 clock["dive"] += time.perf_counter() - diving
-                if node_bound >= best_J - tolerance(best_J):
+                if _reaches(node_bound, best_J):
                     continue
             if time.perf_counter() >= deadline:
                 # The node stays open rather than strong branching past the limit (a dive
@@ -1215,6 +1212,12 @@ class BranchPrice:
             "wall_time": time.perf_counter() - began,
         }
         return BranchPriceResult(tuple(best_routes), best_J, _finite(global_bound), status, stats)
+
+
+def _reaches(bound: float, cutoff: float) -> bool:
+    """Whether a bound prunes against ``cutoff`` (the incumbent's J), within a relative
+    PRUNE_TOLERANCE."""
+    return bound >= cutoff - PRUNE_TOLERANCE * max(1.0, abs(cutoff))
 
 
 def _most_fractional_first(values: dict[tuple, float]) -> list[tuple]:

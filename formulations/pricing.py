@@ -90,15 +90,11 @@ class TaskPrices:
 def arrival_cut_terms(pieces: Sequence[tuple[float, float, float, float, float]],
                       theta: float) -> tuple[float, float, float]:
     """The (aav, closer, goods per kg) price terms of ``TaskPrices.arrival_cuts`` pieces at
-    arrival term ``theta``, in the labelling's order of float operations."""
-    aav = closer = goods = 0.0
-    for lo, hi, w_aav, w_closer, w_goods in pieces:
-        if theta > lo:
-            g = min(theta, hi) - lo
-            aav += w_aav * g
-            closer += w_closer * g
-            goods += w_goods * g
-    return aav, closer, goods
+    arrival term ``theta``: the labelling's own function, so the same float operations."""
+    if not pieces:
+        return 0.0, 0.0, 0.0
+    rows = np.array(pieces, float).T[:, None, :]  # (lo, hi, aav, closer, goods) x 1 task
+    return _arrival_cut_terms(np.ascontiguousarray(rows), 0, theta)
 
 
 @dataclass

@@ -326,17 +326,13 @@ class BranchPrice:
     # --- LP plumbing ---------------------------------------------------------------------
     def _row(self, lower: float, upper: float,
              entries: Sequence[tuple[int, float]] = ()) -> int:
-        columns = np.array([j for j, _ in entries], np.int32)
-        values = np.array([v for _, v in entries], float)
-        self.h.addRow(lower, upper, len(entries), columns, values)
+        self.h.addRow(lower, upper, len(entries), *_sparse(entries))
         self.n_rows += 1
         return self.n_rows - 1
 
     def _col(self, cost: float, lower: float, upper: float,
              entries: Sequence[tuple[int, float]]) -> int:
-        rows = np.array([r for r, _ in entries], np.int32)
-        vals = np.array([v for _, v in entries], float)
-        self.h.addCol(cost, lower, upper, len(entries), rows, vals)
+        self.h.addCol(cost, lower, upper, len(entries), *_sparse(entries))
         self.n_cols += 1
         return self.n_cols - 1
 
@@ -610,20 +606,7 @@ class BranchPrice:
                     later.append((theta, GOODS, lam * col.amounts[m] / demand))
                 if m in col.closes:
                     later.append((theta, CLOSERS, lam))
-            breaks = sorted({0.0, *(theta for theta, _, _ in later)})
-            pieces: list[tuple[float, float, int]] = []
-            total = 0.0
-            for lo, hi in itertools.pairwise(breaks):
-                mass: dict[int, float] = {}
-                for theta, source, weight in later:
-                    if theta > lo:
-                        mass[source] = mass.get(source, 0.0) + weight
-                source = max(sorted(mass), key=mass.__getitem__)
-                total += mass[source] * (hi - lo)
-                if pieces and pieces[-1][2] == source and pieces[-1][1] == lo:
-                    pieces[-1] = (pieces[-1][0], hi, source)
-                else:
-                    pieces.append((lo, hi, source))
+            total, pieces = _largest_share_pieces(later)
             if total + x[self.nobody[m]] - x[self.ctime[m]] <= ARRIVAL_CUT_VIOLATION:
                 continue
             entries = [(self.ctime[m], 1.0), (self.nobody[m], -1.0)]
@@ -1212,6 +1195,35 @@ class BranchPrice:
             "wall_time": time.perf_counter() - began,
         }
         return BranchPriceResult(tuple(best_routes), best_J, _finite(global_bound), status, stats)
+
+
+def _sparse(entries: Sequence[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """(indices, values) of a row's or column's entries, as highspy takes them."""
+    return (np.array([j for j, _ in entries], np.int32),
+            np.array([v for _, v in entries], float))
+
+
+def _largest_share_pieces(later: Sequence[tuple[float, int, float]]
+                          ) -> tuple[float, list[tuple[float, float, int]]]:
+    """An arrival cut's separation for one task from its (theta, source, weight) shares:
+    per interval between consecutive arrivals, the source with the most weight arriving
+    later; (the integral of that largest share, the pieces (lo, hi, source), adjacent
+    intervals of one source merged)."""
+    breaks = sorted({0.0, *(theta for theta, _, _ in later)})
+    pieces: list[tuple[float, float, int]] = []
+    total = 0.0
+    for lo, hi in itertools.pairwise(breaks):
+        mass: dict[int, float] = {}
+        for theta, source, weight in later:
+            if theta > lo:
+                mass[source] = mass.get(source, 0.0) + weight
+        source = max(sorted(mass), key=mass.__getitem__)
+        total += mass[source] * (hi - lo)
+        if pieces and pieces[-1][2] == source and pieces[-1][1] == lo:
+            pieces[-1] = (pieces[-1][0], hi, source)
+        else:
+            pieces.append((lo, hi, source))
+    return total, pieces
 
 
 def _reaches(bound: float, cutoff: float) -> bool:

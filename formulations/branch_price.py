@@ -83,6 +83,12 @@ ARRIVAL_CUT_VIOLATION = 1e-4
 ARRIVAL_CUT_ROUNDS = 2
 #: The sources of an arrival cut's piece besides an AAV (>= 0): the closers, the goods.
 CLOSERS, GOODS = -1, -2
+#: Strong branching scores a visit candidate until it has this many measured rises per
+#: side (its own and its children's), then its pseudo-costs do (BranchPrice.strongest; 0:
+#: strong branching always). On 4/10 seed 2 (600 s) strong branching at every node took 252
+#: s and left the bound 3.2 % below J*; with 1 the search proved J* in 455-572 s, choosing
+#: the branch in 6 s (docs/formulations.md).
+STRONG_RELIABILITY = 1
 #: Reduced costs above -this count as non-negative (column generation has converged).
 RC_TOLERANCE = 1e-9
 #: A node is pruned when its bound is within this (relative) of the incumbent.
@@ -121,9 +127,12 @@ MASTER_MIP_SECONDS = 60.0
 NG_GROWTH_ROUNDS = 5
 #: Dives (BranchPrice.dive) from the root and then from the nodes reached while the dives
 #: so far have solved at most this share of the master LPs (strong branching's included).
-#: On 4/10 seed 1 (300 s, a loaded machine) 0.1 gave 5 dives (15 s) that improved nothing,
-#: 0.25 gave 18 dives (50 s) that took the plan from 17.995 to 17.286.
-DIVE_SHARE = 0.25
+#: With strong branching at every node, on 4/10 seed 1 (300 s, a loaded machine) 0.1 gave 5
+#: dives (15 s) that improved nothing, 0.25 gave 18 dives (50 s) that took the plan from
+#: 17.995 to 17.286. With reliability branching and the arrival cuts, on 4/10 seed 2 0.1
+#: proved J* in 455 s (3 dives, 27 s), 0.25 in 565 s (6 dives, 83 s); at 0.1 the search on
+#: seed 1 still reaches J* (by a dive).
+DIVE_SHARE = 0.1
 #: A dive fixes to 0, with each step, the visits nearer to 0 than this (from 20 tasks up
 #: it is otherwise a step per visit: 8/20 seed 2's root dive took 135 s, then 58 s).
 DIVE_DROP = 0.1
@@ -171,7 +180,8 @@ class BranchPrice:
                  heuristic_cap: int = 3,
                  columns_per_aav: int = 30, closer_rows: bool = True,
                  cover_cuts: bool = True, symmetry: bool = True, threads: int = 1,
-                 strong_candidates: int = 8, time_branching: bool = True,
+                 strong_candidates: int = 8, strong_reliability: int | None = None,
+                 time_branching: bool = True,
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None,
@@ -199,6 +209,11 @@ class BranchPrice:
         self.columns_per_aav = columns_per_aav
         self.closer_rows = closer_rows
         self.strong_candidates = strong_candidates
+        self.strong_reliability = (STRONG_RELIABILITY if strong_reliability is None
+                                   else strong_reliability)
+        # Reliability branching's history, per (AAV, task): [rise per unit, count] of the
+        # side to 0 and of the side to 1 (BranchPrice.strongest).
+        self.pseudo_costs: dict[tuple[int, int], list[list]] = {}
         self.time_branching = time_branching
         # None: the large-instance measures from NG_FROM_TASKS / PRIMAL_FROM_TASKS up (docs).
         if ng_size is None:
@@ -951,10 +966,12 @@ class BranchPrice:
                     arrivals.setdefault((col.aav, m), []).append((v, col.theta[m]))
             for e in col.arcs:
                 arc[col.aav, e] = arc.get((col.aav, e), 0.0) + v
-        frac = _most_fractional_first(self.visits(x))
+        visit = self.visits(x)
+        frac = _most_fractional_first(visit)
         if frac:
             if self.strong_candidates > 1 and len(frac) > 1:
-                k, m = self.strongest(frac[:self.strong_candidates])
+                k, m = self.strongest([(key, visit[key])
+                                       for key in frac[:self.strong_candidates]])
             else:
                 (k, m) = frac[0]
             return Decision("visit", k, m, "0")
@@ -998,37 +1015,60 @@ class BranchPrice:
                 best, best_spread = (key, mean), spread
         return best
 
-    def strongest(self, candidates: list[tuple[int, int]]) -> tuple[int, int]:
-        """Of the (AAV, task) visit candidates, the one whose two children's LPs over the
-        present columns (no pricing: a score, not a bound) rise the most, by the product of
-        the two rises. The LP is left as it was (bounds and basis)."""
+    def strongest(self, candidates: list[tuple[tuple[int, int], float]]) -> tuple[int, int]:
+        """Of the (AAV, task) visit candidates with their x_km, the one whose two children's
+        LPs rise the most, by the product of the two rises. A candidate is scored by strong
+        branching (its children's LPs over the present columns, no pricing: a score, not a
+        bound) until that has been done ``strong_reliability`` times, and from then on by its
+        pseudo-costs, the mean rise per unit of x_km moved on each side (reliability
+        branching, Achterberg, Koch and Martin 2005). The LP is left as it was (bounds and
+        basis)."""
         import highspy
 
         value = self.h.getInfo().objective_function_value
-        saved = self.basis()
-        self.h.setOptionValue("simplex_strategy", DUAL_SIMPLEX)  # bound changes only
-        best, best_score = candidates[0], -math.inf
-        for k, m in candidates:
-            visiting = {c.index for c in self.visiting.get((k, m), ())}
-            rises = []
-            for close in (visiting, set(self.columns_of[k]) - visiting):
-                newly = np.array(sorted(close - self.closed), np.int32)
-                if len(newly):
-                    self.h.changeColsBounds(len(newly), newly, np.zeros(len(newly)),
-                                            np.zeros(len(newly)))
-                self.h.run()
-                self.lp_solves += 1
-                ok = self.h.getModelStatus() == highspy.HighsModelStatus.kOptimal
-                child = self.h.getInfo().objective_function_value if ok else math.inf
-                rises.append(max(child - value, 1e-9))
-                if len(newly):
-                    self.h.changeColsBounds(len(newly), newly, np.zeros(len(newly)),
-                                            np.full(len(newly), self.inf))
-                self.restore_basis(saved)
-            score = rises[0] * rises[1]
+        saved = None
+        best, best_score = candidates[0][0], -math.inf
+        for (k, m), v in candidates:
+            moves = (v, 1.0 - v)  # to 0, to 1
+            history = self.pseudo_costs.get((k, m))
+            if self.strong_reliability and history is not None and \
+                    min(count for _, count in history) >= self.strong_reliability:
+                rises = [move * total / count for move, (total, count)
+                         in zip(moves, history, strict=True)]
+            else:
+                if saved is None:
+                    saved = self.basis()
+                    self.h.setOptionValue("simplex_strategy", DUAL_SIMPLEX)  # bounds only
+                visiting = {c.index for c in self.visiting.get((k, m), ())}
+                rises = []
+                for close in (visiting, set(self.columns_of[k]) - visiting):
+                    newly = np.array(sorted(close - self.closed), np.int32)
+                    if len(newly):
+                        self.h.changeColsBounds(len(newly), newly, np.zeros(len(newly)),
+                                                np.zeros(len(newly)))
+                    self.h.run()
+                    self.lp_solves += 1
+                    ok = self.h.getModelStatus() == highspy.HighsModelStatus.kOptimal
+                    child = self.h.getInfo().objective_function_value if ok else math.inf
+                    rises.append(child - value)
+                    if len(newly):
+                        self.h.changeColsBounds(len(newly), newly, np.zeros(len(newly)),
+                                                np.full(len(newly), self.inf))
+                    self.restore_basis(saved)
+                for side, (rise, move) in enumerate(zip(rises, moves, strict=True)):
+                    self.record_rise((k, m), side, rise, move)
+            score = max(rises[0], 1e-9) * max(rises[1], 1e-9)
             if score > best_score:
                 best, best_score = (k, m), score
         return best
+
+    def record_rise(self, key: tuple[int, int], side: int, rise: float, move: float) -> None:
+        """A child's LP rise over its parent's when x_km moved by ``move`` to 0 (side 0) or
+        to 1 (side 1), into the candidate's pseudo-costs."""
+        if math.isfinite(rise):  # an infeasible child says nothing per unit
+            history = self.pseudo_costs.setdefault(key, [[0.0, 0], [0.0, 0]])
+            history[side][0] += max(rise, 0.0) / move
+            history[side][1] += 1
 
     def root(self, time_limit: float | None = None) -> dict[str, float]:
         """The root LP by column generation alone (no incumbent, no branching): its value,
@@ -1086,8 +1126,12 @@ class BranchPrice:
             return J, False
 
         mip_columns = 0  # the columns at the integer master's last run (0: not yet run)
+        # The children of visit branches, by their queue tie-break: (AAV, task), side, how
+        # far x_km moves, the parent's LP value; their LP rises feed the pseudo-costs.
+        moved: dict[int, tuple[tuple[int, int], int, float, float]] = {}
         while queue:
-            bound, _, decisions, basis = heapq.heappop(queue)
+            bound, tie, decisions, basis = heapq.heappop(queue)
+            parent = moved.pop(tie, None)
             if _reaches(bound, best_J):
                 continue
             if time.perf_counter() >= deadline:
@@ -1123,6 +1167,9 @@ class BranchPrice:
                 continue
             if self.artificial_value(x) > 1e-9:
                 continue  # infeasible node
+            if parent is not None:
+                key, side, move, parent_value = parent
+                self.record_rise(key, side, value - parent_value, move)
             # The dives' share is counted in master LPs, not seconds: the same search
             # then dives from the same nodes on any machine (same seed, same result).
             if self.dive_share and dive_lps <= self.dive_share * (self.lp_solves - dive_lps):
@@ -1157,8 +1204,14 @@ class BranchPrice:
                 else:
                     sides = [choice, Decision(choice.kind, choice.aav, choice.key, "1")]
                 basis = self.basis()
-                for side in sides:
-                    heapq.heappush(queue, (node_bound, next(counter), (*decisions, side), basis))
+                v = self.visits(x).get((choice.aav, choice.key), 0.0) \
+                    if choice.kind == "visit" else None
+                for index, side in enumerate(sides):
+                    order = next(counter)
+                    if v is not None:
+                        moved[order] = ((choice.aav, choice.key), index, (v, 1.0 - v)[index],
+                                        value)
+                    heapq.heappush(queue, (node_bound, order, (*decisions, side), basis))
                 if log:
                     log(f"node {nodes}: LP {value:.6f} bound {node_bound:.6f} "
                         f"best {best_J:.6f} branch {choice}")

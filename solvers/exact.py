@@ -172,6 +172,7 @@ class BranchPriceAllocator(Settings):
         cover_cuts=Boolean(),
         symmetry=Boolean(),
         strong_candidates=Interval(int, 1, None),
+        strong_reliability=NoneOr(Interval(int, 0, None)),
         time_branching=Boolean(),
         goods_time_rows=Boolean(),
         ng_size=NoneOr(Interval(int, 0, None)),
@@ -188,7 +189,8 @@ class BranchPriceAllocator(Settings):
     def __init__(self, time_limit: float | None = None, incumbent: str = "dga",
                  heuristic_cap: int = 3, columns_per_aav: int = 30,
                  closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
-                 strong_candidates: int = 8, time_branching: bool = True,
+                 strong_candidates: int = 8, strong_reliability: int | None = None,
+                 time_branching: bool = True,
                  goods_time_rows: bool = True, ng_size: int | None = None,
                  ng_growth_rounds: int | None = None,
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
@@ -204,6 +206,7 @@ class BranchPriceAllocator(Settings):
         self.columns_per_aav = columns_per_aav
         self.closer_rows = closer_rows
         self.strong_candidates = strong_candidates
+        self.strong_reliability = strong_reliability
         self.time_branching = time_branching
         self.goods_time_rows = goods_time_rows
         self.ng_size = ng_size

@@ -48,9 +48,11 @@ def test_exact_bp_equals_brute_force(seed: int) -> None:
     J_brute, _ = brute_force(instance)
     # The default ng neighbourhoods hold all 3 tasks (the relaxation is exact); with one
     # task each (odd seeds) the relaxed pricing admits returns to a task, and the exact
-    # labelling must settle what it cannot. Every third seed runs the integer master and
-    # smoothed heuristic rounds as well (both off by default at this size).
-    extra = {"master_mip_nodes": 100, "dual_smoothing": 0.7} if seed % 3 == 0 else {}
+    # labelling must settle what it cannot. Seeds 0, 3, 6, ... run the integer master and
+    # smoothed heuristic rounds as well (both off by default at this size), seeds 1, 4,
+    # 7, ... strong branching at every node instead of reliability branching.
+    extra = {"master_mip_nodes": 100, "dual_smoothing": 0.7} if seed % 3 == 0 else \
+        {"strong_reliability": 0} if seed % 3 == 1 else {}
     result = solve_bp(instance, ng_size=1 if seed % 2 else 8, **extra)
     assert result.stats["status"] == "optimal"
     assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
@@ -388,6 +390,32 @@ def test_the_root_dive_finds_the_optimum_and_leaves_the_root_lp_as_it_was() -> N
         search.restore_basis(saved)
         assert search.solve_lp()[0] == pytest.approx(value, rel=1e-12, abs=1e-12)
     assert reached == [3, 4, 9, 10, 11, 14]
+
+
+def test_reliability_branching_scores_a_scored_candidate_from_its_pseudo_costs() -> None:
+    # At the LP solution strong branching scored, each candidate's pseudo-costs give back
+    # the rises it measured (move times rise per unit moved): the same choice, no LP solved.
+    # Of the 2 x 4 instances 500-515, those whose root LP has two or more fractional
+    # visits, all children feasible.
+    checked = []
+    for seed in range(16):
+        instance = tiny_instance(500 + seed, n_aavs=2, n_tasks=4, max_demand=5)
+        search = BranchPrice(instance, strong_reliability=1)
+        clock = {"lp": 0.0, "pricing": 0.0}
+        _, _, x, _ = search.column_generation(search.apply(()), math.inf, math.inf, clock)
+        candidates = [(key, v) for key, v in sorted(search.visits(x).items())
+                      if 1e-6 < v < 1.0 - 1e-6]
+        if len(candidates) < 2:
+            continue
+        solves = search.lp_solves
+        first = search.strongest(candidates)
+        assert search.lp_solves == solves + 2 * len(candidates)
+        if any(count == 0 for key, _ in candidates for _, count in search.pseudo_costs[key]):
+            continue
+        assert search.strongest(candidates) == first
+        assert search.lp_solves == solves + 2 * len(candidates)
+        checked.append(seed)
+    assert len(checked) >= 3, checked
 
 
 @pytest.mark.parametrize("seed", [4, 7])

@@ -5,7 +5,7 @@
         --sizes 2/4 2/6 3/6 3/8 4/10                                       # a short run
 
     python benchmarks/exact_scaling.py --sizes 3/8 4/10 8/20 16/40 32/80 --per-size 5 \
-        --large-per-size 3 --time-limit 600 --cache results/exact-scaling.jsonl
+        --large-per-size 3 --time-limit 600 --cache reports/exact-scaling.jsonl
                                                       # the three backends side by side
 
 Instances: the paper's scenario generator (TABLE 1 fleet, demands 5-60 kg, windows of 15-40
@@ -16,7 +16,9 @@ reports/exact-scaling.md (tables plus the command and machine) and prints one li
 ``--cache`` keeps every finished run as one JSON line, with the commit that measured it: a
 run already there (same instance, backend, limit and threads) is not run again, so a long
 benchmark can be run in parts (one per core) and an interrupted one loses nothing. The report
-names every commit its rows come from.
+names every commit its rows come from. The cache of reports/exact-scaling.md is committed
+beside it (reports/exact-scaling.jsonl), so that the report can be written again, or a size
+re-run alone, from a clean checkout: delete a backend's rows of a size and run the command.
 """
 
 from __future__ import annotations

@@ -1019,10 +1019,10 @@ class BranchPrice:
         """Of the (AAV, task) visit candidates with their x_km, the one whose two children's
         LPs rise the most, by the product of the two rises. A candidate is scored by strong
         branching (its children's LPs over the present columns, no pricing: a score, not a
-        bound) until that has been done ``strong_reliability`` times, and from then on by its
-        pseudo-costs, the mean rise per unit of x_km moved on each side (reliability
-        branching, Achterberg, Koch and Martin 2005). The LP is left as it was (bounds and
-        basis)."""
+        bound) until each side has ``strong_reliability`` measured rises (strong branching's
+        or, from the search, its children's), and from then on by its pseudo-costs, the mean
+        rise per unit of x_km moved on each side (reliability branching, Achterberg, Koch and
+        Martin 2005). The LP is left as it was (bounds and basis)."""
         import highspy
 
         value = self.h.getInfo().objective_function_value
@@ -1127,7 +1127,8 @@ class BranchPrice:
 
         mip_columns = 0  # the columns at the integer master's last run (0: not yet run)
         # The children of visit branches, by their queue tie-break: (AAV, task), side, how
-        # far x_km moves, the parent's LP value; their LP rises feed the pseudo-costs.
+        # far x_km moves, the parent's LP value. The rise of a child explored further feeds
+        # the pseudo-costs (a pruned child's LP is mostly cut short at the incumbent).
         moved: dict[int, tuple[tuple[int, int], int, float, float]] = {}
         while queue:
             bound, tie, decisions, basis = heapq.heappop(queue)

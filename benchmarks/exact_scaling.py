@@ -67,7 +67,8 @@ def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int
            "lower_bound": stats["lower_bound"], "gap": stats.get("mip_gap"), "wall": wall,
            "greedy": stats.get("warm_start_J"), "root": stats.get("root_bound"),
            "commit": commit,
-           **{key: stats[key] for key in (*TIME_SPLIT, "nodes", "columns", "dives")
+           **{key: stats[key] for key in (*TIME_SPLIT, "nodes", "columns", "dives",
+                                          "purged_columns", "lp_solves")
               if key in stats}}
     if method == "exact" and size not in LARGE:
         # Outside the timed solve: the LP relaxation of the model HiGHS is given.

@@ -136,6 +136,15 @@ DIVE_SHARE = 0.1
 #: A dive fixes to 0, with each step, the visits nearer to 0 than this (from 20 tasks up
 #: it is otherwise a step per visit: 8/20 seed 2's root dive took 135 s, then 58 s).
 DIVE_DROP = 0.1
+#: Column management (BranchPrice.purge_columns): above this many columns per row of the
+#: master as built (before arrival cuts and branching rows, which come and go by node) it
+#: sheds its columns of largest reduced cost down to POOL_KEEP of that. Measured on 4/10
+#: (173 rows) seeds 1-3, one thread, two runs side by side: a pool of 3 000 columns proved
+#: them in 99, 198 and 147 s (117, 600 and 187 s keeping every column: seed 2's LPs had
+#: 32 000); 6 000 took seeds 2 and 3 to 328 and 154 s, 1 500 to 385 and 123 s (the pricing
+#: found the shed columns again: 186 000 priced on seed 2 against 93 000).
+COLUMNS_PER_ROW = 16.0
+POOL_KEEP = 0.5
 
 Arc3 = tuple[int, int, int]
 
@@ -187,7 +196,8 @@ class BranchPrice:
                  primal_resolves: bool | None = None,
                  heuristic_round_columns: int = 120, dual_smoothing: float | None = None,
                  master_mip_nodes: int = 0, dive_share: float | None = None,
-                 arrival_cut_rounds: int | None = None) -> None:
+                 arrival_cut_rounds: int | None = None,
+                 columns_per_row: float | None = None) -> None:
         import highspy
 
         self.instance = instance
@@ -231,6 +241,9 @@ class BranchPrice:
         self.arrival_cut_rounds = (ARRIVAL_CUT_ROUNDS if arrival_cut_rounds is None
                                    else arrival_cut_rounds)
         self.threads = threads
+        per_row = COLUMNS_PER_ROW if columns_per_row is None else columns_per_row
+        self.generated = 0  # columns ever added (purge_columns removes some)
+        self.purged = 0
         self.lp_solves = 0  # master LPs solved (column generation, strong branching, dives)
         self._heuristic_next = 0  # the AAV the next heuristic round starts with
         w1, w2, w3 = instance.weights
@@ -319,6 +332,7 @@ class BranchPrice:
                 h.changeRowBounds(self.closer_time[m], -self.inf, self.inf)
         full = sum(a.full_range_cost / instance.e_base for a in instance.aavs)
         self.big = 10.0 * (self.constant + len(self.tasks) * (w1 + w2 + w3 * full)) + 100.0
+        self.column_limit = int(per_row * self.n_rows)  # 0: every column stays
         self.columns: list[Column] = []
         self.column_at: dict[int, Column] = {}  # by LP column
         self.arriving: dict[int, list[Column]] = {}  # by timed task visited on time
@@ -413,17 +427,80 @@ class BranchPrice:
                 if coef:
                     entries.append((row, -coef))
         col.index = self._col(col.op, 0.0, self.inf, entries)
+        self.generated += 1
+        self._register(col)
+        return col
+
+    def _register(self, col: Column) -> None:
+        """Enter a live column into the indexes by LP column, AAV, task, arc and key."""
         self.columns.append(col)
         self.column_at[col.index] = col
-        self.columns_of[n].append(col.index)
+        self.columns_of[col.aav].append(col.index)
         for m in col.theta:
             self.arriving.setdefault(m, []).append(col)
         for m in col.free_amounts:
-            self.visiting.setdefault((n, m), []).append(col)
+            self.visiting.setdefault((col.aav, m), []).append(col)
         for arc in col.arcs:
-            self.using_arc.setdefault((n, arc), []).append(col)
-        self.by_key[n, tail, col.closes] = col
-        return col
+            self.using_arc.setdefault((col.aav, arc), []).append(col)
+        self.by_key[col.aav, col.tail, col.closes] = col
+
+    def purge_columns(self, x: np.ndarray, queue: list) -> tuple[np.ndarray, list]:
+        """Column management between nodes: once the master holds more than
+        ``columns_per_row`` columns per row of the master as built, the columns of largest
+        positive reduced cost at the node just solved leave the LP until POOL_KEEP of that
+        limit is left. A column basic in the
+        present LP or in an open node's saved basis stays (so every saved basis stays square
+        and valid), and so does each AAV's first column (its empty schedule, which keeps
+        every node's LP feasible). No bound depends on the pool: the exact pricing finds any
+        schedule of negative reduced cost again, whether it was once a column or not.
+        Returns the node's LP solution and ``queue`` in the LP's new column indices."""
+        import highspy
+
+        if not self.column_limit or len(self.columns) <= self.column_limit:
+            return x, queue
+        basic = highspy.HighsBasisStatus.kBasic
+        saved = {id(entry[3]): entry[3] for entry in queue if entry[3] is not None}
+        protected = {cols[0] for cols in self.columns_of}
+        for cols, _ in [self.basis(), *saved.values()]:
+            protected.update(j for j, status in enumerate(cols) if status == basic)
+        reduced = np.asarray(self.h.getSolution().col_dual)
+        reduced = np.concatenate([reduced, np.zeros(self.n_cols - len(reduced))])
+        ranked = sorted((c for c in self.columns
+                         if c.index not in protected and reduced[c.index] > RC_TOLERANCE),
+                        key=lambda c: (-reduced[c.index], c.index))
+        drop = ranked[:len(self.columns) - int(POOL_KEEP * self.column_limit)]
+        if not drop:
+            return x, queue
+        keep = np.ones(self.n_cols, bool)
+        keep[[c.index for c in drop]] = False
+        self.h.deleteCols(len(drop), np.array(sorted(c.index for c in drop), np.int32))
+        self.n_cols = int(keep.sum())
+        renumber = np.cumsum(keep) - 1
+        live = [c for c in self.columns if keep[c.index]]
+        for col in live:
+            col.index = int(renumber[col.index])
+        self.columns, self.column_at, self.by_key = [], {}, {}
+        self.arriving, self.visiting, self.using_arc = {}, {}, {}
+        self.columns_of = [[] for _ in self.instance.aavs]
+        for col in live:
+            self._register(col)
+        self.covered = {m: int(renumber[j]) for m, j in self.covered.items()}
+        self.ctime = {m: int(renumber[j]) for m, j in self.ctime.items()}
+        self.nobody = {m: int(renumber[j]) for m, j in self.nobody.items()}
+        self.robust = {key: (row, int(renumber[j])) for key, (row, j) in self.robust.items()}
+        self.closed = {int(renumber[j]) for j in self.closed if keep[j]}
+        self.purged += len(drop)
+        # A basis saved before the latest columns came is shorter than the mask.
+        renumbered = {key: ([status for status, kept in zip(cols, keep[:len(cols)],
+                                                            strict=True) if kept], rows)
+                      for key, (cols, rows) in saved.items()}
+        queue = [(bound, tie, decisions, None if basis is None else renumbered[id(basis)])
+                 for bound, tie, decisions, basis in queue]
+        heapq.heapify(queue)
+        # HiGHS forgets the solution with the columns; the kept basis is optimal, so the
+        # LP is back without a simplex iteration (strong branching reads its value).
+        _, x, _ = self.solve_lp()
+        return x, queue
 
     def _robust_row(self, key: tuple) -> tuple[int, int]:
         if key not in self.robust:
@@ -1079,7 +1156,7 @@ class BranchPrice:
         value, bound, _, converged = self.cut_and_price(self.apply(()), math.inf, deadline,
                                                         clock)
         return {"lp": value, "bound": bound if not converged else value,
-                "converged": converged, "columns": len(self.columns),
+                "converged": converged, "columns": self.generated,
                 "seconds": time.perf_counter() - began}
 
     # --- the search ----------------------------------------------------------------------
@@ -1140,9 +1217,9 @@ class BranchPrice:
                 status, stop_reason = "feasible", "time limit"
                 break
             if nodes and self.master_mip_nodes and \
-                    len(self.columns) >= MASTER_MIP_GROWTH * mip_columns:
+                    self.generated >= MASTER_MIP_GROWTH * mip_columns:
                 # Between nodes: it leaves the LP at the root's bounds.
-                mip_columns = len(self.columns)
+                mip_columns = self.generated
                 solving = time.perf_counter()
                 left = deadline - solving
                 plan = self.integer_master_plan(
@@ -1191,6 +1268,9 @@ class BranchPrice:
                 # cut short by it took 16/40 seed 2 to 659 s of 600).
                 heapq.heappush(queue, (node_bound, next(counter), decisions, basis))
                 continue
+            # Here the LP is the node's (its reduced costs rank the columns) and the basis
+            # its children will start from is the present one.
+            x, queue = self.purge_columns(x, queue)
             choosing = time.perf_counter()
             choice = self.branching_candidates(x)
             clock["branching"] += time.perf_counter() - choosing
@@ -1234,7 +1314,9 @@ class BranchPrice:
             "nodes": nodes,
             "open_nodes": len(queue),
             **{f"{kind}_branches": count for kind, count in branches.items()},
-            "columns": len(self.columns),
+            "columns": self.generated,
+            "purged_columns": self.purged,
+            "lp_solves": self.lp_solves,
             "lp_time": clock["lp"],
             "pricing_time": clock["pricing"],
             "arrival_cuts": sum(map(len, self.arrival_cuts.values())),

@@ -183,6 +183,7 @@ class BranchPriceAllocator(Settings):
         master_mip_nodes=Interval(int, 0, None),
         dive_share=NoneOr(Interval(float, 0, 1, closed="both")),
         arrival_cut_rounds=NoneOr(Interval(int, 0, None)),
+        columns_per_row=NoneOr(Interval(float, 0, None)),
         threads=Interval(int, 1, None),
     )
 
@@ -196,7 +197,7 @@ class BranchPriceAllocator(Settings):
                  primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
                  dual_smoothing: float | None = None, master_mip_nodes: int = 0,
                  dive_share: float | None = None, arrival_cut_rounds: int | None = None,
-                 threads: int = 1) -> None:
+                 columns_per_row: float | None = None, threads: int = 1) -> None:
         self.time_limit = time_limit
         self.symmetry = symmetry
         self.threads = threads
@@ -217,6 +218,7 @@ class BranchPriceAllocator(Settings):
         self.master_mip_nodes = master_mip_nodes
         self.dive_share = dive_share
         self.arrival_cut_rounds = arrival_cut_rounds
+        self.columns_per_row = columns_per_row
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:

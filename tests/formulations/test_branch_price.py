@@ -418,6 +418,45 @@ def test_reliability_branching_scores_a_scored_candidate_from_its_pseudo_costs()
     assert len(checked) >= 3, checked
 
 
+@pytest.mark.parametrize("seed", [2, 4, 7, 10, 28])  # trees of 3 to 11 nodes
+def test_shedding_columns_keeps_the_brute_force_optimum(seed: int) -> None:
+    # A pool of a few columns: after every branching node the master keeps only the columns
+    # basic in some open node's basis and each AAV's empty schedule; the pricing must bring
+    # back whatever a later node needs.
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=3, max_demand=4 + seed % 3)
+    J_brute, _ = brute_force(instance)
+    result = solve_bp(instance, columns_per_row=0.1)
+    assert result.stats["purged_columns"] > 0
+    assert result.stats["status"] == "optimal"
+    assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
+    assert result.stats["lower_bound"] <= J_brute + 1e-9
+
+
+def test_shedding_columns_keeps_the_node_lp_and_the_saved_bases() -> None:
+    instance = tiny_instance(7, n_aavs=2, n_tasks=3, max_demand=5)
+    search = BranchPrice(instance, columns_per_row=0.1)
+    clock = {"lp": 0.0, "pricing": 0.0}
+    value, _, x, _ = search.column_generation(search.apply(()), math.inf, math.inf, clock)
+    before = {(c.aav, c.tail, c.closes): x[c.index] for c in search.columns}
+    queue = [(value, 0, (), search.basis())]
+    x, queue = search.purge_columns(x, queue)
+    assert search.purged > 0 and len(search.columns) == len(before) - search.purged
+    # The LP is the node's again (strong branching reads its value) and every kept column
+    # has its lambda, its cost and its place in the indexes under its new index.
+    assert search.h.getInfo().objective_function_value + search.constant == \
+        pytest.approx(value, abs=1e-9)
+    assert search.h.getInfo().simplex_iteration_count == 0
+    costs = search.h.getLp().col_cost_
+    for col in search.columns:
+        assert x[col.index] == pytest.approx(before[col.aav, col.tail, col.closes], abs=1e-9)
+        assert costs[col.index] == col.op and search.column_at[col.index] is col
+        assert col.index in search.columns_of[col.aav]
+    # The open node's saved basis, renumbered, is still the optimal one.
+    search.restore_basis(queue[0][3])
+    search.h.run()
+    assert search.h.getInfo().simplex_iteration_count == 0
+
+
 @pytest.mark.parametrize("seed", [4, 7])
 def test_arrival_window_branching_keeps_the_brute_force_optimum(seed: int) -> None:
     # Instances of test_exact_bp_equals_brute_force whose trees branch on arrival windows.
@@ -471,7 +510,8 @@ def test_dynamic_states_equal_the_milp(seed: int) -> None:
     pytest.importorskip("pyomo")
     instance, state = _dynamic_states(seed)
     milp = ExactAllocator().plan(state)
-    bp = solve_bp(instance, state)
+    # Odd seeds: a pool of a few columns, so that every node after the root sheds some.
+    bp = solve_bp(instance, state, columns_per_row=0.1 if seed % 2 else None)
     assert milp.stats["status"] == "optimal"
     assert bp.stats["status"] == "optimal"
     assert state.violations(bp.routes) == []

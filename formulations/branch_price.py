@@ -448,11 +448,11 @@ class BranchPrice:
         """Column management between nodes: once the master holds more than
         ``columns_per_row`` columns per row of the master as built, the columns of largest
         positive reduced cost at the node just solved leave the LP until POOL_KEEP of that
-        limit is left. A column basic in the
-        present LP or in an open node's saved basis stays (so every saved basis stays square
-        and valid), and so does each AAV's first column (its empty schedule, which keeps
-        every node's LP feasible). No bound depends on the pool: the exact pricing finds any
-        schedule of negative reduced cost again, whether it was once a column or not.
+        limit is left. A column basic in the present LP or in an open node's saved basis
+        stays (so every saved basis stays square and valid), and so does each AAV's first
+        column (its empty schedule, which keeps every node's LP feasible). No bound depends
+        on the pool: the exact pricing finds any schedule of negative reduced cost again,
+        whether it was once a column or not.
         Returns the node's LP solution and ``queue`` in the LP's new column indices."""
         import highspy
 
@@ -986,7 +986,7 @@ class BranchPrice:
 
     def integer_master_plan(self, cutoff: float, time_limit: float
                             ) -> tuple[Route, ...] | None:
-        """A plan from the master with lambda integer over every column so far (HiGHS's
+        """A plan from the master with lambda integer over its columns (HiGHS's
         MIP, at most ``master_mip_nodes`` nodes and ``time_limit`` s, pruning at
         ``cutoff``): it puts together columns that no single LP solution does, or None.
         Its objective is at least the J of its plan, and equal with the right closing

@@ -535,14 +535,18 @@ def test_dynamic_state_with_a_committed_join_as_the_milp() -> None:
     assert result.stats["J"] == pytest.approx(10 * 51 / 3600 + 2 * 10 / 800, rel=1e-12)
 
 
-def test_same_seed_same_result() -> None:
+@pytest.mark.parametrize("columns_per_row", [None, 0.1])  # the default pool, and shedding
+def test_same_seed_same_result(columns_per_row: float | None) -> None:
     instance = tiny_instance(7, n_aavs=2, n_tasks=3, max_demand=5)
-    first, second = (solve_bp(instance, dive_share=0.5) for _ in range(2))
+    first, second = (solve_bp(instance, dive_share=0.5, columns_per_row=columns_per_row)
+                     for _ in range(2))
     assert first.stats["status"] == "optimal"
     assert first.stats["nodes"] > 5  # a real tree, not only a root
     assert first.routes == second.routes
     assert first.stats["dives"] >= 2  # the root's and later ones
-    for key in ("J", "lower_bound", "root_bound", "nodes", "columns", "dives"):
+    assert (first.stats["purged_columns"] > 0) == (columns_per_row is not None)
+    for key in ("J", "lower_bound", "root_bound", "nodes", "columns", "dives",
+                "purged_columns", "lp_solves"):
         assert first.stats[key] == second.stats[key], key
 
 

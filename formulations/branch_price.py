@@ -241,7 +241,6 @@ class BranchPrice:
         self.arrival_cut_rounds = (ARRIVAL_CUT_ROUNDS if arrival_cut_rounds is None
                                    else arrival_cut_rounds)
         self.threads = threads
-        per_row = COLUMNS_PER_ROW if columns_per_row is None else columns_per_row
         self.generated = 0  # columns ever added (purge_columns removes some)
         self.purged = 0
         self.lp_solves = 0  # master LPs solved (column generation, strong branching, dives)
@@ -332,6 +331,7 @@ class BranchPrice:
                 h.changeRowBounds(self.closer_time[m], -self.inf, self.inf)
         full = sum(a.full_range_cost / instance.e_base for a in instance.aavs)
         self.big = 10.0 * (self.constant + len(self.tasks) * (w1 + w2 + w3 * full)) + 100.0
+        per_row = COLUMNS_PER_ROW if columns_per_row is None else columns_per_row
         self.column_limit = int(per_row * self.n_rows)  # 0: every column stays
         self.columns: list[Column] = []
         self.column_at: dict[int, Column] = {}  # by LP column
@@ -463,8 +463,8 @@ class BranchPrice:
         protected = {cols[0] for cols in self.columns_of}
         for cols, _ in [self.basis(), *saved.values()]:
             protected.update(j for j, status in enumerate(cols) if status == basic)
-        reduced = np.asarray(self.h.getSolution().col_dual)
-        reduced = np.concatenate([reduced, np.zeros(self.n_cols - len(reduced))])
+        # A column newer than the LP gets reduced cost 0: it is never shed unseen.
+        reduced = self._padded(np.asarray(self.h.getSolution().col_dual))
         ranked = sorted((c for c in self.columns
                          if c.index not in protected and reduced[c.index] > RC_TOLERANCE),
                         key=lambda c: (-reduced[c.index], c.index))
@@ -877,7 +877,8 @@ class BranchPrice:
         return value, bound, x, converged
 
     def _padded(self, x: np.ndarray) -> np.ndarray:
-        """An LP solution with lambda = 0 for the columns added after that LP."""
+        """An LP's per-column vector (lambda, reduced costs) with 0 for the columns added
+        after that LP."""
         return np.concatenate([x, np.zeros(self.n_cols - len(x))])
 
     def _heuristic_round(self, prices: list[TaskPrices], restrictions: list[Restrictions],

@@ -69,10 +69,15 @@ def run(args: argparse.Namespace) -> None:
     common = {"jobs": args.jobs, "executor": args.executor, "scheduler": args.scheduler}
     run_batch(RunConfig(files, OUT, methods=heuristics, mode="both", **common))
     run_batch(RunConfig(regression_files(), OUT, methods=heuristics, mode="both", **common))
-    exact = [m for m in EXACT_METHODS if m in present]
     exact_count = args.per_scale if args.exact_per_scale is None else args.exact_per_scale
-    run_batch(RunConfig(instance_files("4/10", exact_count), OUT, methods=exact,
-                        mode="static", time_limit=args.exact_time_limit, **common))
+    exact_files = instance_files("4/10", exact_count)
+    bp_limit = args.exact_time_limit if args.bp_time_limit is None else args.bp_time_limit
+    compact = [m for m in EXACT_METHODS if m != BOUND_METHOD]
+    for methods, limit in ((compact, args.exact_time_limit), ([BOUND_METHOD], bp_limit)):
+        methods = [m for m in methods if m in present]
+        if methods and exact_files:
+            run_batch(RunConfig(exact_files, OUT, methods=methods, mode="static",
+                                time_limit=limit, **common))
     if args.bound_per_scale and BOUND_METHOD in present:
         larger = [f for scale in SCALES[1:] for f in instance_files(scale, args.bound_per_scale)]
         run_batch(RunConfig(larger, OUT, methods=[BOUND_METHOD], mode="static",
@@ -280,6 +285,8 @@ def main() -> None:
     parser.add_argument("--per-scale", type=int, default=20)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--exact-time-limit", type=float, default=60.0)
+    parser.add_argument("--bp-time-limit", type=float, default=None,
+                        help=f"{BOUND_METHOD}'s time limit at 4/10 (default: --exact-time-limit)")
     parser.add_argument("--exact-per-scale", type=int, default=None,
                         help="4/10 instances the exact methods run on (default: --per-scale)")
     parser.add_argument("--bound-per-scale", type=int, default=0,

@@ -110,7 +110,7 @@ class ExactAllocator(Settings):
         stats.update(report.as_stats())
         stats["build_time"] = built
         stats["wall_time"] = time.perf_counter() - began
-        return _checked(evaluator, routes, stats)
+        return _checked(state, evaluator, routes, stats)
 
 
 class CpSatAllocator(Settings):
@@ -154,7 +154,7 @@ class CpSatAllocator(Settings):
         routes = outcome.routes if outcome.routes is not None else start
         stats.update(outcome.stats)
         stats["wall_time"] = time.perf_counter() - began
-        return _checked(evaluator, routes, stats, objective_key="scaled_objective",
+        return _checked(state, evaluator, routes, stats, objective_key="scaled_objective",
                         check_objective=False)
 
 
@@ -252,7 +252,7 @@ class BranchPriceAllocator(Settings):
         # The master LPs are HiGHS's; the version recorded is highspy's.
         stats.update(objective=result.J, solver="branch-price", solver_version=_highs_version(),
                      threads=self.threads, seed=seed, wall_time=time.perf_counter() - began)
-        return _checked(evaluator, result.routes, stats)
+        return _checked(state, evaluator, result.routes, stats)
 
 
 def _highs_version() -> str:
@@ -261,10 +261,16 @@ def _highs_version() -> str:
     return version("highspy")
 
 
-def _checked(evaluator: CostEvaluator, routes: tuple, stats: dict[str, Any],
-             objective_key: str = "objective", check_objective: bool = True) -> PlanResult:
+def _checked(state: PlanningState, evaluator: CostEvaluator, routes: tuple,
+             stats: dict[str, Any], objective_key: str = "objective",
+             check_objective: bool = True) -> PlanResult:
     """Record the evaluator's J; an optimal solver objective that disagrees with it
-    (``costs_agree``) marks the result as an error (a model bug), never silently passes."""
+    (``costs_agree``) marks the result as an error (a model bug), never silently passes.
+    The lower bound is the better of the solver's and the tasks-on-their-own bound
+    (formulations/task_bound.py), so a run stopped before its solver has one still has
+    one; ``solver_lower_bound`` keeps the solver's own."""
+    from tsac_bench.formulations.task_bound import task_lower_bound
+
     J = evaluator.cost(routes)
     stats["J"] = J
     objective = stats.get(objective_key)
@@ -272,7 +278,9 @@ def _checked(evaluator: CostEvaluator, routes: tuple, stats: dict[str, Any],
             and not costs_agree(J, objective)):
         stats["status"] = "error"
         stats["stop_reason"] = f"solver objective {objective} != evaluator J {J}"
-    bound = stats.get("lower_bound")
-    if bound is not None:
-        stats["mip_gap"] = max(0.0, J - bound) / max(abs(J), 1e-10)
+    stats["task_bound"] = task_lower_bound(state)
+    stats["solver_lower_bound"] = stats.get("lower_bound")
+    bound = max(b for b in (stats["solver_lower_bound"], stats["task_bound"]) if b is not None)
+    stats["lower_bound"] = bound
+    stats["mip_gap"] = max(0.0, J - bound) / max(abs(J), 1e-10)
     return PlanResult(tuple(routes), stats)

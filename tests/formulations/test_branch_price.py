@@ -516,6 +516,8 @@ def test_dynamic_states_equal_the_milp(seed: int) -> None:
     assert bp.stats["status"] == "optimal"
     assert state.violations(bp.routes) == []
     assert close(bp.stats["J"], milp.stats["J"]), (bp.stats["J"], milp.stats["J"])
+    # The tasks-on-their-own bound (formulations/task_bound.py) holds in dynamic states too.
+    assert milp.stats["task_bound"] <= milp.stats["J"] + 1e-9
 
 
 def test_dynamic_state_with_a_committed_join_as_the_milp() -> None:

@@ -22,6 +22,8 @@ with the lowest priority first.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from tsac_bench.model import Instance
@@ -64,14 +66,19 @@ class HeuristicSelection:
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
         del rng  # deterministic given the structure; the engine's permutation is random
+        return self.choice(view, lambda m: self.priority(view, m))
+
+    def choice(self, view: DecisionView, priority: Callable[[int], float]) -> int:
+        """The rule given the priorities (``select``'s, or ones already computed, as the
+        teacher columns of ``tsac_env`` do for every visible task)."""
         own = [m for m in view.candidates if view.is_member(m)]
         for m in own:
             if self.ineffective(view, m):
                 return m
         joins = [m for m in view.candidates if not view.is_member(m)]
         if joins:
-            return max(joins, key=lambda m: (self.priority(view, m), -m))
-        return min(own, key=lambda m: (self.priority(view, m), m))
+            return max(joins, key=lambda m: (priority(m), -m))
+        return min(own, key=lambda m: (priority(m), m))
 
 
 class HOCFAllocator(OCFAllocator):

@@ -62,6 +62,14 @@ COMPETITION_SCALE: Mapping[str, float] = {
 #: free route (its anchor included) to the task (km / 10), which prices an insertion better
 #: than the distance from the anchor; whether the AAV's own visit to the task is late.
 EXTRA_TASK_FEATURES = ("dx", "dy", "coverable_share", "route_distance", "own_late")
+#: Teacher columns (feature set 3): HOCF's priority of the task for the deciding AAV (its
+#: default weights, divided by their sum, so in [0, 1]) and whether the task is HOCF's own
+#: choice in this state. Why: a network that must re-derive HOCF's rule from raw columns
+#: imitates it only approximately, and every policy trained so far sat within a few per
+#: cent of HOCF either way: the imitation error was as large as what the learning signal
+#: could add. With the teacher's choice in the state, following HOCF is one weight, and
+#: what the critic has to learn is where to deviate from it.
+TEACHER_FEATURES = ("teacher_priority", "teacher_choice")
 
 
 def _scales(names: Sequence[str], table: Mapping[str, float]) -> np.ndarray:
@@ -85,15 +93,18 @@ class FeatureSet:
     """A versioned state and action space; a policy file names the version it was trained
     on. 1: the task rows of ``TASK_FEATURES`` + ``EXTRA_TASK_FEATURES``, actions = the
     tasks. 2: the task rows also carry ``COMPETITION_FEATURES``, and the pass token leads
-    the actions (action 0 = ``PASS``, action i = task row i - 1)."""
+    the actions (action 0 = ``PASS``, action i = task row i - 1). 3: as 2, the task rows
+    also carrying ``TEACHER_FEATURES``."""
 
     version: int
     competition: bool
     pass_action: bool
+    teacher: bool = False
 
     @property
     def task_dim(self) -> int:
-        return TASK_DIM + (len(COMPETITION_FEATURES) if self.competition else 0)
+        return (TASK_DIM + (len(COMPETITION_FEATURES) if self.competition else 0)
+                + (len(TEACHER_FEATURES) if self.teacher else 0))
 
     @property
     def offset(self) -> int:
@@ -102,7 +113,22 @@ class FeatureSet:
 
 
 FEATURE_SETS: Mapping[int, FeatureSet] = {1: FeatureSet(1, False, False),
-                                          2: FeatureSet(2, True, True)}
+                                          2: FeatureSet(2, True, True),
+                                          3: FeatureSet(3, True, True, teacher=True)}
+
+
+def teacher_features(view: DecisionView) -> np.ndarray:
+    """``TEACHER_FEATURES`` per visible task (HOCF with its default weights)."""
+    from tsac_bench.solvers.ocf.hocf import HeuristicSelection, HOCFAllocator
+
+    teacher = HOCFAllocator()
+    weights = teacher.w_urgency, teacher.w_distance, teacher.w_residual
+    rule = HeuristicSelection(view.game.instance, *weights)
+    priority = {m: rule.priority(view, m) for m in view.game.visible}
+    total = sum(weights)
+    # A terminal state (no candidate) has no choice to mark.
+    choice = rule.choice(view, priority.__getitem__) if view.candidates else None
+    return np.array([(priority[m] / total, float(m == choice)) for m in view.game.visible])
 
 
 @dataclass(frozen=True)
@@ -148,6 +174,8 @@ def observe(view: DecisionView, features: FeatureSet = FEATURE_SETS[1]) -> Obser
     columns = [tasks, relative, coverable[:, None], route_distance[:, None], own_late[:, None]]
     if features.competition:
         columns.append(view.competition_features() / _COMPETITION_DIVISOR)
+    if features.teacher:
+        columns.append(teacher_features(view))
     tasks = np.concatenate(columns, axis=1).astype(np.float32)
     depots = (view.depot_features() / _DEPOT_DIVISOR).astype(np.float32)
     index = {m: i + features.offset for i, m in enumerate(game.visible)}

@@ -264,6 +264,27 @@ class LabelledBatch:
 
 
 
+#: The teacher prior's share spread uniformly over the valid actions (the rest is on the
+#: teacher's choice): the KL stays finite, and deviating from the teacher costs
+#: log((1 - e) |valid| / e), about 5.3 units of ``teacher_prior`` with 10 valid actions.
+TEACHER_PRIOR_SPREAD = 0.05
+
+
+def teacher_prior_of(states: dict[str, Tensor]) -> Tensor:
+    """Log-probabilities of the teacher prior over each state's actions (-inf outside the
+    validity mask): ``1 - TEACHER_PRIOR_SPREAD`` on the task row whose teacher-choice column
+    (feature set 3, the last column) is set, the rest uniform over the valid actions."""
+    mask = states["action_mask"]
+    choice = states["tasks"][..., -1]
+    if "pass_token" in states:
+        choice = torch.cat([torch.zeros_like(choice[:, :1]), choice], dim=1)
+    valid = mask.float()
+    uniform = valid / valid.sum(dim=-1, keepdim=True).clamp(min=1)
+    prior = TEACHER_PRIOR_SPREAD * uniform + (1 - TEACHER_PRIOR_SPREAD) * choice * valid
+    prior = prior / prior.sum(dim=-1, keepdim=True).clamp(min=1e-12)
+    return torch.where(mask, prior.clamp(min=1e-30).log(), torch.full_like(prior, -torch.inf))
+
+
 def _descend(optimizer: torch.optim.Optimizer, loss: Tensor) -> None:
     optimizer.zero_grad()
     loss.backward()
@@ -272,8 +293,13 @@ def _descend(optimizer: torch.optim.Optimizer, loss: Tensor) -> None:
 class DiscreteSAC:
     """The actor, the twin critics, their targets, alpha and the optimisers."""
 
-    def __init__(self, net: NetConfig, config: SACConfig, device: torch.device | str = "cpu"):
+    def __init__(self, net: NetConfig, config: SACConfig, device: torch.device | str = "cpu",
+                 teacher_prior: float = 0.0):
         self.config = config
+        #: > 0: the actor's regulariser is this weight (J units, fixed) times the KL
+        #: divergence from ``teacher_prior_of`` (the states must carry the teacher columns)
+        #: instead of alpha times the negative entropy.
+        self.teacher_prior = teacher_prior
         self.device = torch.device(device)
         self.actor = PolicyNet(net).to(self.device)
         self.critics = [QNet(net).to(self.device) for _ in range(2)]
@@ -311,7 +337,11 @@ class DiscreteSAC:
         with torch.no_grad():
             q = torch.minimum(*(c(batch.states) for c in self.critics))
         mask = batch.states["action_mask"]
-        loss = expectation(probs, self.alpha * log_probs - q, mask).mean()
+        if self.teacher_prior > 0:
+            regulariser = self.teacher_prior * (log_probs - teacher_prior_of(batch.states))
+        else:
+            regulariser = self.alpha * log_probs
+        loss = expectation(probs, regulariser - q, mask).mean()
         entropy = -expectation(probs, log_probs, mask)
         return loss, entropy.detach()
 
@@ -384,7 +414,8 @@ class DiscreteSAC:
         if extra is not None:
             actor_loss = actor_loss + extra(distribution[1])
         _descend(self.actor_optimizer, actor_loss)
-        _descend(self.alpha_optimizer, self.alpha_loss(entropy, batch.states["action_mask"]))
+        if self.teacher_prior == 0:  # the KL to the teacher has a fixed weight
+            _descend(self.alpha_optimizer, self.alpha_loss(entropy, batch.states["action_mask"]))
         return actor_loss, entropy
 
     def imitate(self, batch: Batch) -> dict[str, float]:
@@ -489,6 +520,12 @@ class TrainConfig:
     #: distillation run (margin 0) 53 % of the labelled states had several actions tied for
     #: the least J and 7 % a best action ahead of the second by 1 J or more.
     distill_margin: float = 0.0
+    #: rollout signal: > 0 regularises the actor by this weight (J units, fixed) times its
+    #: KL divergence from the teacher prior (HOCF's choice, ``teacher_prior_of``; needs a
+    #: feature set with teacher columns) in place of the entropy bonus: the soft-greedy
+    #: policy becomes prior x exp(Q / weight), HOCF's choice unless the critic puts another
+    #: action ahead by about 5 weights. 0: the entropy bonus with its tuned alpha.
+    teacher_prior: float = 0.0
     update_every: int = 2  # td: env steps per gradient update
     curriculum: tuple[tuple[float, tuple[str, ...]], ...] = DEFAULT_CURRICULUM
     #: rollout signal: share of the episodes played on a moment of a simulated dynamic run
@@ -524,6 +561,7 @@ class TrainConfig:
         clone_floor=Interval(float, 0, "clone_weight"),
         distill_weight=Interval(float, 0, None),
         distill_margin=Interval(float, 0, None),
+        teacher_prior=Interval(float, 0, None),
         update_every=Interval(int, 1, None),
         replan_share=Interval(float, 0, 1),
         label_share=Interval(float, 0, 1),
@@ -560,6 +598,9 @@ class TrainConfig:
         if self.features not in FEATURE_SETS:
             raise ValueError(f"features must be one of {sorted(FEATURE_SETS)}")
         fs = FEATURE_SETS[self.features]
+        if self.teacher_prior > 0 and not fs.teacher:
+            raise InvalidSetting(f"teacher_prior: needs a feature set with teacher columns "
+                                 f"(3), not {self.features}")
         if self.net is None:
             object.__setattr__(self, "net", NetConfig(
                 AGENT_DIM, fs.task_dim, DEPOT_DIM, d_model=32, heads=4, layers=2,
@@ -632,7 +673,7 @@ class _Run:
                  checkpoint: dict[str, Any] | None) -> None:
         self.out, self.config, self.device = out, config, device
         torch.manual_seed(config.seed)
-        self.sac = DiscreteSAC(config.net, config.sac, device)
+        self.sac = DiscreteSAC(config.net, config.sac, device, config.teacher_prior)
         self.buffer = ReplayBuffer(config.sac.buffer_size)
         self.demos = ReplayBuffer(config.warmup)  # the demonstrator's decisions
         self.rng = np.random.default_rng(config.seed)

@@ -59,6 +59,7 @@ from tsac_bench.solvers.tsac.sac import (  # noqa: E402
     best_label,
     label_candidates,
     rollout_values,
+    teacher_prior_of,
     train,
 )
 
@@ -304,6 +305,26 @@ def test_feature_set_2_adds_scaled_competition_columns_and_leads_with_the_pass()
         DecisionView(fresh, n, game.candidates(n)).competition_features())
 
 
+def test_feature_set_3_adds_hocf_priority_and_choice_as_teacher_columns():
+    game, view = mid_game()
+    v3 = FEATURE_SETS[3]
+    two, three = observe(view, V2), observe(view, v3)
+    assert three.tasks.shape == (len(game.visible), v3.task_dim) == (len(game.visible), 27)
+    np.testing.assert_array_equal(three.tasks[:, :V2.task_dim], two.tasks)
+    np.testing.assert_array_equal(three.action_mask, two.action_mask)
+    hocf = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
+    choice = hocf.select(view, np.random.default_rng(7))
+    priority, chosen = three.tasks[:, -2], three.tasks[:, -1]
+    assert chosen.sum() == 1.0 and game.visible[int(np.argmax(chosen))] == choice
+    # By hand for one task: the weights 1, 2, 1 sum to 4.
+    m = game.visible[3]
+    assert priority[3] == pytest.approx(hocf.priority(view, m) / 4, rel=1e-6)
+    assert ((priority >= 0) & (priority <= 1)).all()
+    # Zero-padded like every other column.
+    gym_form = pad(three, 80, 8)
+    assert gym_form["tasks"].shape == (80, 27) and not gym_form["tasks"][len(game.visible):].any()
+
+
 def test_padding_never_changes_the_real_tokens_with_competition_and_pass():
     torch.manual_seed(0)
     actor = PolicyNet(SMALL_V2).eval()
@@ -480,6 +501,38 @@ def test_the_distillation_loss_is_the_cross_entropy_toward_the_least_final_J():
         expected = -np.mean([torch.log(sac.actor.distribution(collate([s]))[0][0, t]).item()
                              for s, t in zip(states, (1, 1, 0), strict=True)])
     assert loss == pytest.approx(expected, rel=1e-5)
+
+
+def test_the_teacher_prior_puts_95_percent_on_hocfs_choice_and_the_rest_uniformly():
+    tasks = torch.zeros((1, 3, 4))
+    tasks[0, 1, -1] = 1.0  # task row 1 is the teacher's choice: action 2 after the pass
+    states = {"tasks": tasks, "pass_token": torch.zeros((1, 3)),
+              "action_mask": torch.tensor([[True, True, True, False]])}
+    prior = teacher_prior_of(states)[0].exp()
+    torch.testing.assert_close(prior, torch.tensor([0.05 / 3, 0.05 / 3, 0.95 + 0.05 / 3, 0.0]))
+
+
+def test_with_a_teacher_prior_the_actor_loss_is_the_kl_regularised_one():
+    torch.manual_seed(0)
+    v3 = FEATURE_SETS[3]
+    net = NetConfig(AGENT_DIM, v3.task_dim, DEPOT_DIM, d_model=16, heads=2, layers=2,
+                    feedforward=32, features=3, pass_action=True)
+    sac = DiscreteSAC(net, SACConfig(), teacher_prior=0.5)
+    _, view = mid_game()
+    states = collate([observe(view, v3)])
+    batch = Batch(states, torch.zeros(0), torch.zeros(0), states, torch.zeros(0))
+    with torch.no_grad():
+        loss, _ = sac.actor_loss(batch)
+        probs, log_probs = sac.actor.distribution(states)
+        q = torch.minimum(*(c(states) for c in sac.critics))
+    valid = states["action_mask"][0]
+    prior = teacher_prior_of(states)[0]
+    expected = sum(probs[0, a] * (0.5 * (log_probs[0, a] - prior[a]) - q[0, a])
+                   for a in torch.nonzero(valid).flatten().tolist())
+    assert loss.item() == pytest.approx(expected.item(), rel=1e-5)
+    # HOCF's choice (its teacher column) carries 95 % of the prior plus its uniform share.
+    choice = 1 + int(torch.argmax(states["tasks"][0, :, -1]))
+    assert prior[choice].exp().item() == pytest.approx(0.95 + 0.05 / int(valid.sum()))
 
 
 @pytest.mark.parametrize("seed", range(5))

@@ -382,6 +382,9 @@ def train(
     resume: Annotated[Path | None, typer.Option(help="a checkpoint.pt to continue from")]
     = None,
     threads: Annotated[int, typer.Option(min=1, help="torch CPU threads")] = 1,
+    label_workers: Annotated[int, typer.Option(
+        min=1, help="processes that run the rollout labels (the same run, faster on as many "
+        "cores); may differ on --resume")] = 1,
     stop_after: Annotated[float | None, typer.Option(
         min=1, help="seconds: end this call at the next episode's end, with a checkpoint to "
         "--resume from")] = None,
@@ -434,7 +437,7 @@ def train(
             progress.update(bar, completed=step, info=info)
 
         summary = run_training(out, config, device=device, resume=resume, on_step=on_step,
-                               stop_after=stop_after)
+                               stop_after=stop_after, label_workers=label_workers)
     console.print(f"trained {summary['steps']} steps ({summary['episode_count']} episodes) in "
                   f"{summary['seconds']:.0f} s on {summary['device']}; policy: "
                   f"{out / 'policy.pt'}")

@@ -149,27 +149,78 @@ class Batch:
                    torch.tensor([float(t.done) for t in transitions], device=device))
 
 
+def finish_games(game: CoalitionGame, aav: int, jobs: Sequence[tuple[int, int]],
+                 completion: SelectionRule, seed: int) -> list[float]:
+    """The final J of each job (choice, r): on a fork of the game, AAV ``aav`` takes the
+    choice (``PASS`` or a task), then ``completion`` finishes the game with the generator
+    ``sample_rng(seed, r)``. A module-level function of picklable arguments, so that
+    ``RolloutWorkers`` can run it in another process."""
+    finals = []
+    for choice, r in jobs:
+        fork = game.fork()
+        if choice == PASS:
+            fork.pass_turn(aav)
+        else:
+            fork.decide(aav, choice)
+        fork.run(completion, sample_rng(seed, r), k_max=K_MAX, c_max=C_MAX)
+        finals.append(fork.cost)
+    return finals
+
+
+class RolloutWorkers:
+    """Worker processes that share the rollouts of a labelled state: each takes a
+    contiguous share of its (action, rollout) jobs with its own copy of the game. Every
+    job's result depends on the game, the action and its seed only, so the labels are the
+    same to the last digit with any number of workers; only the wall time changes."""
+
+    def __init__(self, workers: int) -> None:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        if workers < 2:
+            raise ValueError(f"workers: at least 2 (1 runs the rollouts in-process), got "
+                             f"{workers}")
+        self.workers = workers
+        # forkserver, not fork: the parent holds torch's thread pools, which a forked
+        # child must not inherit.
+        self._pool = ProcessPoolExecutor(workers,
+                                         mp_context=multiprocessing.get_context("forkserver"))
+
+    def finish_games(self, game: CoalitionGame, aav: int, jobs: Sequence[tuple[int, int]],
+                     completion: SelectionRule, seed: int) -> list[float]:
+        """``finish_games`` over the workers; the results in the order of ``jobs``."""
+        # Two shares per worker: rollout lengths differ by action, so the shares even out.
+        shares = [part.tolist() for part in np.array_split(np.arange(len(jobs)),
+                                                           2 * self.workers) if len(part)]
+        futures = [self._pool.submit(finish_games, game, aav, [jobs[j] for j in share],
+                                     completion, seed) for share in shares]
+        return [final for future in futures for final in future.result()]
+
+    def close(self) -> None:
+        self._pool.shutdown()
+
+    def __enter__(self) -> RolloutWorkers:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
 def rollout_values(game: CoalitionGame, view: DecisionView, actions: Sequence[int],
                    features: FeatureSet, completion: SelectionRule, *, rollouts: int,
-                   seed: int) -> np.ndarray:
+                   seed: int, workers: RolloutWorkers | None = None) -> np.ndarray:
     """The final J of each action's rollouts, shape (len(actions), rollouts): on a fork of
     the game, the deciding AAV takes the action (a pass, or the ADD/REMOVE of a task, which
     the engine accepts or rejects), then ``completion`` finishes the game (new rounds, the
     engine's stop rules) with the generator ``sample_rng(seed, r)`` for rollout r: the same
     AAV orders for every action of the state (common random numbers), so their labels
-    differ by the actions, not by the draws."""
-    values = np.empty((len(actions), rollouts))
-    for i, action in enumerate(actions):
-        choice = action_choice(view, action, features)
-        for r in range(rollouts):
-            fork = game.fork()
-            if choice == PASS:
-                fork.pass_turn(view.aav)
-            else:
-                fork.decide(view.aav, choice)
-            fork.run(completion, sample_rng(seed, r), k_max=K_MAX, c_max=C_MAX)
-            values[i, r] = fork.cost
-    return values
+    differ by the actions, not by the draws. ``workers``: run them in those processes (the
+    same numbers)."""
+    jobs = [(action_choice(view, action, features), r)
+            for action in actions for r in range(rollouts)]
+    finish = workers.finish_games if workers is not None else finish_games
+    return np.array(finish(game, view.aav, jobs, completion, seed)).reshape(len(actions),
+                                                                           rollouts)
 
 
 def label_candidates(valid: np.ndarray, most: int, rng: np.random.Generator,
@@ -209,12 +260,14 @@ class LookAheadSelection:
     """Selection rule: the one-step look-ahead that the rollout labels encode. In each
     state, the actions of ``label_candidates`` (``candidates`` of them, ``completion``'s own
     choice among them; None: every valid action) are labelled by ``rollout_values`` and the
-    action of ``best_label`` is taken: the policy that distillation imitates."""
+    action of ``best_label`` is taken: the policy that distillation imitates. ``workers``:
+    where the rollouts run (None: in this process)."""
 
     def __init__(self, completion: SelectionRule, features: FeatureSet = FEATURE_SETS[2], *,
-                 candidates: int | None = None, rollouts: int = 1) -> None:
+                 candidates: int | None = None, rollouts: int = 1,
+                 workers: RolloutWorkers | None = None) -> None:
         self.completion, self.features = completion, features
-        self.candidates, self.rollouts = candidates, rollouts
+        self.candidates, self.rollouts, self.workers = candidates, rollouts, workers
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
         valid = np.flatnonzero(observe(view, self.features).action_mask)
@@ -224,7 +277,8 @@ class LookAheadSelection:
         actions = label_candidates(valid, self.candidates or len(valid), rng, reference)
         finals = rollout_values(view.game, view, actions.tolist(), self.features,
                                 self.completion, rollouts=self.rollouts,
-                                seed=int(rng.integers(2**31))).mean(axis=1)
+                                seed=int(rng.integers(2**31)),
+                                workers=self.workers).mean(axis=1)
         return action_choice(view, best_label(actions.tolist(), finals.tolist(), reference),
                              self.features)
 
@@ -674,8 +728,8 @@ class _Run:
     """What a training run carries between steps and across a resume."""
 
     def __init__(self, out: Path, config: TrainConfig, device: torch.device,
-                 checkpoint: dict[str, Any] | None) -> None:
-        self.out, self.config, self.device = out, config, device
+                 checkpoint: dict[str, Any] | None, workers: RolloutWorkers | None) -> None:
+        self.out, self.config, self.device, self.workers = out, config, device, workers
         torch.manual_seed(config.seed)
         self.sac = DiscreteSAC(config.net, config.sac, device, config.teacher_prior)
         self.buffer = ReplayBuffer(config.sac.buffer_size)
@@ -719,11 +773,13 @@ class _Run:
 
 def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path | None = None,
           on_step: Callable[[int, dict[str, float]], None] | None = None,
-          stop_after: float | None = None) -> dict[str, Any]:
+          stop_after: float | None = None, label_workers: int = 1) -> dict[str, Any]:
     """Train from scratch (or from ``resume``'s checkpoint) up to ``config.steps`` env
     steps; returns the summary written to ``curve.json``. ``stop_after`` (seconds of this
     call; rollout signal) ends the call early at an episode's end, with a checkpoint to
-    resume from and the policy so far."""
+    resume from and the policy so far. ``label_workers`` > 1 runs the rollout labels in
+    that many processes (``RolloutWorkers``: the same run, faster on as many cores); it is
+    not part of the configuration, so a resumed run may use another number."""
     out.mkdir(parents=True, exist_ok=True)
     torch_device = resolve_device(device)
     checkpoint = None
@@ -731,11 +787,16 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
         checkpoint = torch.load(resume, map_location=torch_device, weights_only=False)
         # The run goes on as it was configured; only its length may change.
         config = TrainConfig.from_dict({**checkpoint["config"], "steps": config.steps})
-    run = _Run(out, config, torch_device, checkpoint)
-    if config.signal == "td":
-        _train_td(run, on_step)
-    else:
-        _train_rollout(run, on_step, stop_after)
+    workers = RolloutWorkers(label_workers) if label_workers > 1 else None
+    try:
+        run = _Run(out, config, torch_device, checkpoint, workers)
+        if config.signal == "td":
+            _train_td(run, on_step)
+        else:
+            _train_rollout(run, on_step, stop_after)
+    finally:
+        if workers is not None:
+            workers.close()
     seconds = time.perf_counter() - run.began
     meta = {"steps": run.step, "episode_count": run.episode, "seed": config.seed,
             "seconds": seconds, "device": str(torch_device), "torch": torch.__version__,
@@ -859,7 +920,8 @@ class _Behaviour:
         actions = label_candidates(valid, config.label_candidates, rng, reference)
         finals = rollout_values(view.game, view, actions.tolist(), self.features,
                                 self.completion, rollouts=config.rollouts,
-                                seed=int(rng.integers(2**31))).mean(axis=1)
+                                seed=int(rng.integers(2**31)),
+                                workers=run.workers).mean(axis=1)
         q = -(finals - finals.mean()) / config.label_scale
         run.buffer.add(Labelled(observation, tuple(actions.tolist()), tuple(q.tolist()),
                                 best_label(actions.tolist(), finals.tolist(), reference,

@@ -53,6 +53,7 @@ from tsac_bench.solvers.tsac.sac import (  # noqa: E402
     Labelled,
     LabelledBatch,
     LookAheadSelection,
+    RolloutWorkers,
     SACConfig,
     TrainConfig,
     Transition,
@@ -391,6 +392,24 @@ def test_a_rollout_label_is_the_J_of_replaying_the_action_and_its_completion():
     assert values[0, 1] == plain.cost
 
 
+def test_rollout_workers_give_the_same_labels_to_the_last_digit():
+    game, view = mid_game()
+    completion = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
+    actions = [0, *np.flatnonzero(observe(view, V2).action_mask[1:])[:4] + 1]
+    alone = rollout_values(game, view, actions, V2, completion, rollouts=3, seed=11)
+    assert alone.shape == (5, 3) and np.ptp(alone) > 0  # rollouts that differ, in order
+    with RolloutWorkers(2) as workers:
+        shared = rollout_values(game, view, actions, V2, completion, rollouts=3, seed=11,
+                                workers=workers)
+        look_ahead = LookAheadSelection(completion, V2, rollouts=2, workers=workers)
+        assert (look_ahead.select(view, np.random.default_rng(4))
+                == LookAheadSelection(completion, V2, rollouts=2).select(
+                    view, np.random.default_rng(4)))
+    np.testing.assert_array_equal(shared, alone)
+    with pytest.raises(ValueError, match="at least 2"):
+        RolloutWorkers(1)
+
+
 def test_policy_files_name_their_feature_set(tmp_path):
     assert load_policy().config.features == 1  # the shipped file predates feature set 2
     torch.manual_seed(1)
@@ -580,6 +599,13 @@ def test_distilled_training_is_the_same_for_the_same_seed(tmp_path):
                                                  b.state_dict().values(), strict=True))
     other = train(tmp_path / "c", distilling(steps=40, seed=1), device="cpu")
     assert other["updates"] != first["updates"]
+
+
+def test_training_with_label_workers_is_the_same_run(tmp_path):
+    alone = train(tmp_path / "a", distilling(steps=40), device="cpu")
+    shared = train(tmp_path / "b", distilling(steps=40), device="cpu", label_workers=2)
+    assert alone["labels"] and shared["labels"] == alone["labels"]
+    assert shared["updates"] == alone["updates"] and shared["episodes"] == alone["episodes"]
 
 
 def test_the_look_ahead_takes_the_action_of_least_rollout_J():

@@ -292,7 +292,14 @@ class CoalitionGame:
     def run(self, rule: SelectionRule, rng: np.random.Generator, *, k_max: int, c_max: int,
             deadline: float | None = None) -> str:
         """Play until a stop condition; returns which one: "stable", "k_max", "c_max" or
-        "time-limit". A pass counts as a decision (``k_max``) but not as a rejection."""
+        "time-limit". A pass counts as a decision (``k_max``) but not as a rejection.
+
+        ``rng`` draws the AAV orders; the rule draws from a stream spawned from it, which
+        does not advance it: the orders of a seed are the same whichever rule plays, so
+        methods compared on a seed differ by their choices, not by their orders (a rule that
+        drew from the order stream changed every later order, and J varies by tens of per
+        cent over orders)."""
+        choices = rng.spawn(1)[0]
         consecutive = 0
         while True:
             decided = False
@@ -308,7 +315,7 @@ class CoalitionGame:
                     continue
                 decided = True
                 view = DecisionView(self, n, candidates)
-                m = rule.select(view, rng)
+                m = rule.select(view, choices)
                 if m == PASS and view.can_pass:
                     self.pass_turn(n)
                     continue
@@ -448,7 +455,8 @@ class DecisionView:
 
 class SelectionRule(Protocol):
     """Picks the task the deciding AAV acts on, one of ``view.candidates``, or ``PASS``
-    when ``view.can_pass``."""
+    when ``view.can_pass``; ``rng`` is the game's stream for the rule's own draws (not the
+    one of the AAV orders, ``CoalitionGame.run``)."""
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int: ...
 

@@ -360,3 +360,29 @@ def test_a_rule_that_passes_whenever_it_may_still_ends_nash_stable():
         stop = game.run(Shy(), np.random.default_rng(2), k_max=10**6, c_max=10**6)
         assert stop == "stable" and improving_moves(game) == [], instance.name
         assert any(d.op == "pass" for d in game.decisions)
+
+
+def test_a_rule_that_draws_meets_the_same_aav_orders_as_one_that_does_not():
+    """Methods compared on a seed differ by their choices, not by their AAV orders: HOCF,
+    and HOCF that also draws a number per decision (as a sampling policy does), play the
+    very same game."""
+    state = PlanningState.static(generate("8/20", 5))
+    hocf = HeuristicSelection(state.instance, 1.0, 2.0, 1.0)
+
+    class Drawing:
+        def __init__(self) -> None:
+            self.draws = 0
+
+        def select(self, view, rng):
+            rng.random()
+            self.draws += 1
+            return hocf.select(view, rng)
+
+    drawing = Drawing()
+    games = [CoalitionGame(state), CoalitionGame(state)]
+    games[0].run(hocf, sample_rng(3, 0), k_max=K_MAX, c_max=C_MAX)
+    games[1].run(drawing, sample_rng(3, 0), k_max=K_MAX, c_max=C_MAX)
+    assert drawing.draws > 50
+    assert [(d.aav, d.task, d.accepted) for d in games[1].decisions] == [
+        (d.aav, d.task, d.accepted) for d in games[0].decisions]
+    assert games[1].cost == games[0].cost

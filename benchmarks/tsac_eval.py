@@ -5,8 +5,10 @@ reduction of TSAC-OCF's mean J against HOCF's (the paper: 39.76 % at 32/80), and
 wins. Every row states its start (``init``) and games per plan call (``samples``): the OCF
 methods share their defaults (``solvers/ocf/engine.py``), so a comparison is on equal footing
 unless a row says otherwise. Extra rows: other policy files (``--ablation``), the
-"incumbent" start (``--incumbent-rows``), sampling temperatures (``--temperatures``). Run by
-hand:
+"incumbent" start (``--incumbent-rows``), sampling temperatures (``--temperatures``), the
+noise control (``--noise-control SHARE``: HOCF deviating to a uniformly drawn candidate in
+that share of its decisions, what a policy that follows HOCF elsewhere gains by deviating
+at random). Run by hand:
     python benchmarks/tsac_eval.py [--instances 10] [--first-seed 900000] [--policy FILE]
 Writes reports/tsac-eval.md (or ``--out``). Held-out instances: generator seeds
 first-seed .. first-seed + instances - 1 (training draws its instance seeds from a generator
@@ -24,12 +26,15 @@ import statistics
 import time
 from pathlib import Path
 
+import numpy as np
 from paper_reproduction import instance_files
 
 from tsac_bench.model.generator import generate
 from tsac_bench.model.io import read_instance
-from tsac_bench.planning import make_allocator
+from tsac_bench.planning import PlanningState, make_allocator
 from tsac_bench.planning.solve import solve
+from tsac_bench.solvers.ocf.engine import INIT, SAMPLES, DecisionView, SelectionRule
+from tsac_bench.solvers.ocf.hocf import HOCFAllocator
 
 SCALES = ("16/40", "32/80")
 #: DGA's start at a re-plan: half its population from the plan in force (solvers/dga.py).
@@ -39,9 +44,35 @@ DGA_START = "half from the plan in force, 1"
 BASELINES = ("hocf", "rocf", "dga")
 
 
+class RandomDeviation:
+    """HOCF's choice, or with probability ``share`` a candidate drawn uniformly (from the
+    rule's own stream, so the AAV orders stay HOCF's)."""
+
+    def __init__(self, hocf: SelectionRule, share: float) -> None:
+        self.hocf, self.share = hocf, share
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
+        if rng.random() < self.share:
+            return int(rng.choice(view.candidates))
+        return self.hocf.select(view, rng)
+
+
+class NoiseControl(HOCFAllocator):
+    """The noise control of a learned policy: a policy that takes HOCF's choice in all but
+    a share of its decisions gains from where it deviates only what it gains beyond this
+    row's random deviations at that share."""
+
+    def __init__(self, share: float, init: str = INIT, samples: int = SAMPLES) -> None:
+        super().__init__(init=init, samples=samples)
+        self.share = share
+
+    def rule(self, state: PlanningState) -> SelectionRule:
+        return RandomDeviation(super().rule(state), self.share)
+
+
 def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
-             temperatures: bool, baselines: tuple[str, ...] = BASELINES
-             ) -> list[tuple[str, str, dict]]:
+             temperatures: bool, baselines: tuple[str, ...] = BASELINES,
+             noise: tuple[float, ...] = ()) -> list[tuple[str, str | HOCFAllocator, dict]]:
     tsac = {"policy": policy} if policy else {}
     rows = [*((name, name, {}) for name in baselines), ("tsac-ocf", "tsac-ocf", tsac)]
     if temperatures:
@@ -53,13 +84,15 @@ def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
     if incumbent:
         rows += [("hocf init=incumbent", "hocf", {"init": "incumbent"}),
                  ("tsac-ocf init=incumbent", "tsac-ocf", {**tsac, "init": "incumbent"})]
+    rows += [(f"hocf, {share:g} random", NoiseControl(share), {}) for share in noise]
     return rows
 
 
-def footing(method: str, settings: dict) -> str:
+def footing(method: str | HOCFAllocator, settings: dict) -> str:
     """The row's start and games per plan call, as the method will run them (an OCF game's
     settings; other methods plan from scratch each call)."""
-    resolved = make_allocator(method, **settings).settings()
+    allocator = make_allocator(method, **settings) if isinstance(method, str) else method
+    resolved = allocator.settings()
     if "init" not in resolved:
         return DGA_START
     return f"{resolved['init']}, {resolved['samples']}"
@@ -97,6 +130,9 @@ def main() -> None:
                         help="add hocf and tsac-ocf rows started from the incumbent plan")
     parser.add_argument("--temperatures", action="store_true",
                         help="add tsac-ocf rows sampled at T = 0.5 and T = 0")
+    parser.add_argument("--noise-control", type=float, action="append", default=[],
+                        metavar="SHARE", help="add a row of HOCF that deviates to a uniformly "
+                        "drawn candidate in this share of its decisions (repeatable)")
     parser.add_argument("--baselines", nargs="+", choices=BASELINES, default=list(BASELINES),
                         help="the baseline rows; hocf, the reference of every row, always")
     parser.add_argument("--paired", metavar="LABEL", action="append", default=[],
@@ -110,7 +146,8 @@ def main() -> None:
     baselines = tuple(args.baselines)
     labels = [label for label, _, _ in variants(
         args.policy, args.ablation, incumbent=args.incumbent_rows,
-        temperatures=args.temperatures, baselines=baselines)]
+        temperatures=args.temperatures, baselines=baselines,
+        noise=tuple(args.noise_control))]
     for reference in args.paired:
         if reference not in labels:
             parser.error(f"--paired: no row {reference!r}; the rows: {', '.join(labels)}")
@@ -125,6 +162,7 @@ def main() -> None:
                + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation)
                + (" --incumbent-rows" if args.incumbent_rows else "")
                + (" --temperatures" if args.temperatures else "")
+               + "".join(f" --noise-control {share:g}" for share in args.noise_control)
                + "".join(f" --paired {shlex.quote(p)}" for p in args.paired))
     names = [name.upper() for name in baselines]
     against = " and ".join(filter(None, [", ".join(names[:-1]), names[-1]]))
@@ -160,7 +198,8 @@ def main() -> None:
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
         rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,
-                        temperatures=args.temperatures, baselines=baselines)
+                        temperatures=args.temperatures, baselines=baselines,
+                        noise=tuple(args.noise_control))
         starts = {label: footing(method, settings) for label, method, settings in rows}
         for label, method, settings in rows:
             for instance in instances:

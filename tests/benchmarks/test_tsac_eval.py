@@ -18,3 +18,34 @@ def test_paired_rows_give_the_mean_difference_its_interval_and_the_counts() -> N
         "| 8/20 | b | +1.00 | [-1.99, +3.99] | +5.0 % | 1 / 2 |",
         "| 8/20 | c | +0.00 | [+0.00, +0.00] | +0.0 % | 0 / 0 |",
     ]
+
+
+
+def test_the_noise_control_is_hocf_at_share_0_and_deviates_in_its_share_of_decisions():
+    import numpy as np
+
+    from tsac_bench.model.generator import generate
+    from tsac_bench.planning.solve import solve
+
+    instance = generate("8/20", 2)
+    assert tsac_eval.footing(tsac_eval.NoiseControl(0.1), {}) == "empty, 1"
+    assert (solve(instance, tsac_eval.NoiseControl(0.0), mode="dynamic").cost
+            == solve(instance, "hocf", mode="dynamic").cost)
+
+    class Hocf:  # stands in for HOCF's rule: always the first candidate, calls counted
+        calls = 0
+
+        def select(self, view, rng):
+            self.calls += 1
+            return view.candidates[0]
+
+    class View:
+        candidates = (3, 5, 8)
+
+    hocf, rng = Hocf(), np.random.default_rng(0)
+    rule = tsac_eval.RandomDeviation(hocf, 0.25)
+    chosen = [rule.select(View(), rng) for _ in range(2000)]
+    deviations = 2000 - hocf.calls
+    assert 2000 * 0.25 - 60 < deviations < 2000 * 0.25 + 60  # 3 standard deviations
+    # A deviation draws uniformly, HOCF's own choice included.
+    assert abs(chosen.count(5) - deviations / 3) < 45 and set(chosen) == {3, 5, 8}

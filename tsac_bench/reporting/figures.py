@@ -47,7 +47,9 @@ MAX_PANELS = 8
 def _save(fig: Any, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path.with_suffix(".png"), dpi=150, bbox_inches="tight")
-    fig.savefig(path.with_suffix(".pdf"), bbox_inches="tight")
+    # No creation date: a report re-written from the same results is the same file.
+    fig.savefig(path.with_suffix(".pdf"), bbox_inches="tight",
+                metadata={"CreationDate": None})
     plt.close(fig)
     return path.with_suffix(".png")
 

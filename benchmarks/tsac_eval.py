@@ -35,6 +35,7 @@ from tsac_bench.planning import PlanningState, make_allocator
 from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.ocf.engine import INIT, SAMPLES, DecisionView, SelectionRule
 from tsac_bench.solvers.ocf.hocf import HOCFAllocator
+from tsac_bench.solvers.ocf.rocf import UniformSelection
 
 SCALES = ("16/40", "32/80")
 #: DGA's start at a re-plan: half its population from the plan in force (solvers/dga.py).
@@ -45,16 +46,16 @@ BASELINES = ("hocf", "rocf", "dga")
 
 
 class RandomDeviation:
-    """HOCF's choice, or with probability ``share`` a candidate drawn uniformly (from the
-    rule's own stream, so the AAV orders stay HOCF's)."""
+    """HOCF's choice, or with probability ``share`` ROCF's (a candidate drawn uniformly,
+    from the rule's own stream, so the AAV orders stay HOCF's)."""
 
     def __init__(self, hocf: SelectionRule, share: float) -> None:
         self.hocf, self.share = hocf, share
+        self.uniform = UniformSelection()
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
-        if rng.random() < self.share:
-            return int(rng.choice(view.candidates))
-        return self.hocf.select(view, rng)
+        rule = self.uniform if rng.random() < self.share else self.hocf
+        return rule.select(view, rng)
 
 
 class NoiseControl(HOCFAllocator):

@@ -1,0 +1,351 @@
+"""Where does deviating from HOCF pay, and can a policy learn it? (issue 17)
+
+Every policy trained with HOCF in its state (reports/tsac-teacher.md) follows HOCF in about
+99 % of its states, and its deviations are no better than random ones, while the one-step
+look-ahead that its rollout labels encode is 13 % below HOCF at 16/40. Two measurements
+separate "the labels carry no signal" from "the signal is there but not learnable":
+
+* ``repeat``: HOCF plays static t = 0 games on the first instances of ``instances/paper-mc/``
+  at one scale; in a share of its states the candidate actions (HOCF's choice among them)
+  are labelled twice, by rollouts with two independent seeds (``rollout_values``, HOCF
+  finishing the game). Against HOCF's own label: the gain of the first labels' best action
+  on the first labels (what the look-ahead believes), on the second (what it gets: the
+  noise-free one-step gain of its choice) and the correlation of the two labellings'
+  advantages.
+
+      python benchmarks/tsac_learnability.py repeat --scale 16/40 --instances 10 [--workers 2]
+
+* ``held-out``: the labelled states of training runs (their checkpoints, in run order),
+  split by time; two models learn each action's advantage over HOCF's choice from the first
+  share: the transformer critic of the method (``QNet``, trained offline on the labels) and
+  gradient-boosted trees on the action's task row, HOCF's row, their difference and the
+  state's context (scikit-learn). On the later states each model deviates to its best
+  action where it predicts a gain above ``tau``; the table gives the mean gain in J per
+  state (against HOCF's label), trained on a quarter, half and all of the first share.
+
+      python benchmarks/tsac_learnability.py held-out results/teacher-kl-0.3-long [RUN ...]
+
+Both print their table; ``--out FILE`` also writes it as markdown.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shlex
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from tsac_bench.model.io import read_instance
+from tsac_bench.planning import PlanningState, make_allocator
+from tsac_bench.solvers.ocf.engine import (
+    C_MAX,
+    K_MAX,
+    CoalitionGame,
+    DecisionView,
+    SelectionRule,
+    sample_rng,
+)
+
+if TYPE_CHECKING:  # torch is loaded where it is used
+    from tsac_bench.solvers.tsac.env import Observation
+    from tsac_bench.solvers.tsac.sac import Labelled, RolloutWorkers
+
+TAUS = (0.0, 0.25, 0.5, 1.0)
+
+
+# ----------------------------------------------------------------- labels and their gains
+
+
+def teacher_action(state: Observation) -> int:
+    """HOCF's choice as an action index (feature set 3: the teacher-choice column; no row
+    set means HOCF passes, action 0)."""
+    from tsac_bench.solvers.tsac.env import TEACHER_FEATURES
+
+    column = TEACHER_FEATURES.index("teacher_choice") - len(TEACHER_FEATURES)
+    chosen = np.flatnonzero(state.tasks[:, column])
+    return 0 if len(chosen) == 0 else 1 + int(chosen[0])
+
+
+@dataclass(frozen=True)
+class Advantages:
+    """A labelled state's other labelled actions and their labels less HOCF's (in J:
+    positive means a lower final J than HOCF's choice)."""
+
+    item: Labelled
+    reference: int
+    actions: tuple[int, ...]
+    gains: np.ndarray
+
+    @classmethod
+    def of(cls, item: Labelled) -> Advantages | None:
+        """None where HOCF's choice was not labelled or nothing else was."""
+        reference = teacher_action(item.state)
+        if reference not in item.actions or len(item.actions) < 2:
+            return None
+        q = dict(zip(item.actions, item.q, strict=True))
+        others = tuple(a for a in item.actions if a != reference)
+        return cls(item, reference, others, np.array([q[a] - q[reference] for a in others]))
+
+    @property
+    def state(self) -> Observation:
+        return self.item.state
+
+
+def deviation_gain(predicted: Sequence[np.ndarray], true: Sequence[np.ndarray],
+                   tau: float) -> tuple[float, float, int]:
+    """Mean gain per state of deviating to the action of largest predicted advantage where
+    that advantage exceeds ``tau`` (HOCF's choice, gain 0, elsewhere), measured by ``true``;
+    the half-width of its 95 % interval (1.96 standard errors); the number of states where
+    it deviates."""
+    gains, deviations = [], 0
+    for guess, truth in zip(predicted, true, strict=True):
+        best = int(np.argmax(guess))
+        if guess[best] > tau:
+            gains.append(float(truth[best]))
+            deviations += 1
+        else:
+            gains.append(0.0)
+    half_width = 1.96 * float(np.std(gains, ddof=1)) / np.sqrt(len(gains))
+    return float(np.mean(gains)), half_width, deviations
+
+
+# ----------------------------------------------------------------------------- repeat
+
+
+class RepeatedLabels:
+    """Selection rule: HOCF's choice; in a share of the states with two or more candidate
+    actions, labels up to ``candidates`` of them (HOCF's among them) twice, with independent
+    rollout seeds, and keeps both labellings' advantages over HOCF's choice."""
+
+    def __init__(self, hocf: SelectionRule, *, share: float, candidates: int, rollouts: int,
+                 workers: RolloutWorkers | None = None) -> None:
+        from tsac_bench.solvers.tsac.env import FEATURE_SETS
+
+        self.hocf, self.share, self.candidates = hocf, share, candidates
+        self.rollouts, self.workers = rollouts, workers
+        self.features = FEATURE_SETS[2]
+        self.pairs: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
+        from tsac_bench.solvers.tsac.env import observe
+        from tsac_bench.solvers.tsac.sac import label_candidates, reference_action, rollout_values
+
+        valid = np.flatnonzero(observe(view, self.features).action_mask)
+        reference = reference_action(view, self.hocf, self.features, rng)
+        if len(valid) > 1 and rng.random() < self.share:
+            actions = label_candidates(valid, self.candidates, rng, reference).tolist()
+            where = actions.index(reference)
+            first, second = (
+                -rollout_values(view.game, view, actions, self.features, self.hocf,
+                                rollouts=self.rollouts, seed=int(rng.integers(2**31)),
+                                workers=self.workers).mean(axis=1)
+                for _ in range(2))
+            self.pairs.append((np.delete(first - first[where], where),
+                               np.delete(second - second[where], where)))
+        return self.hocf.select(view, rng)
+
+
+def repeat_summary(pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> dict[str, float]:
+    """What the first labelling's best action gains by the first labels and by the second,
+    per labelled state (0 where HOCF's own label is the best); how often it is not HOCF's
+    choice; the correlation of the two labellings' advantages."""
+    believed = [max(0.0, float(first.max())) for first, _ in pairs]
+    got = [float(second[first.argmax()]) if first.max() > 0 else 0.0
+           for first, second in pairs]
+    first = np.concatenate([p[0] for p in pairs])
+    second = np.concatenate([p[1] for p in pairs])
+    return {"states": len(pairs), "believed": float(np.mean(believed)),
+            "got": float(np.mean(got)),
+            "deviates": float(np.mean([f.max() > 0 for f, _ in pairs])),
+            "correlation": float(np.corrcoef(first, second)[0, 1])}
+
+
+def run_repeat(args: argparse.Namespace) -> list[str]:
+    from paper_reproduction import instance_files
+
+    from tsac_bench.solvers.tsac.sac import RolloutWorkers
+
+    workers = RolloutWorkers(args.workers) if args.workers > 1 else None
+    pairs: list[tuple[np.ndarray, np.ndarray]] = []
+    try:
+        for path in instance_files(args.scale, args.instances):
+            state = PlanningState.static(read_instance(path))
+            rule = RepeatedLabels(make_allocator("hocf").rule(state), share=args.share,
+                                  candidates=args.candidates, rollouts=args.rollouts,
+                                  workers=workers)
+            CoalitionGame(state, state.base_routes()).run(rule, sample_rng(0, 0), k_max=K_MAX,
+                                                          c_max=C_MAX)
+            pairs += rule.pairs
+            print(f"{path.stem}: {len(rule.pairs)} labelled states", flush=True)
+    finally:
+        if workers is not None:
+            workers.close()
+    s = repeat_summary(pairs)
+    return [
+        "| scale | rollouts per action | labelled states | best action not HOCF's | "
+        "gain believed (labels 1) | gain got (labels 2) | correlation of the advantages |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+        f"| {args.scale} | {args.rollouts} | {s['states']} | {100 * s['deviates']:.1f} % | "
+        f"{s['believed']:+.3f} J | {s['got']:+.3f} J | {s['correlation']:.3f} |",
+    ]
+
+
+# --------------------------------------------------------------------------- held-out
+
+
+def boosting_rows(example: Advantages) -> np.ndarray:
+    """One row per other action: the state's context (agent, task count, valid count,
+    whether HOCF passes), whether the action is the pass, its task row, HOCF's task row and
+    their difference (a pass's row is zeros)."""
+    state = example.state
+    width = state.tasks.shape[1]
+
+    def row(action: int) -> np.ndarray:
+        return state.tasks[action - 1] if action > 0 else np.zeros(width)
+
+    context = np.r_[state.agent, len(state.tasks), state.action_mask.sum(),
+                    example.reference == 0]
+    ours = row(example.reference)
+    return np.array([np.r_[context, action == 0, row(action), ours, row(action) - ours]
+                     for action in example.actions])
+
+
+def fit_boosting(train: Sequence[Advantages], seed: int) -> Callable[[Advantages], np.ndarray]:
+    from sklearn.ensemble import HistGradientBoostingRegressor
+    from threadpoolctl import threadpool_limits
+
+    model = HistGradientBoostingRegressor(max_iter=300, learning_rate=0.05, max_leaf_nodes=15,
+                                          l2_regularization=1.0, random_state=seed)
+    # One OpenMP thread: on a machine whose cores are busy, its spinning threads took 30
+    # times as long.
+    with threadpool_limits(limits=1):
+        model.fit(np.vstack([boosting_rows(e) for e in train]),
+                  np.concatenate([e.gains for e in train]))
+
+    def predict(example: Advantages) -> np.ndarray:
+        with threadpool_limits(limits=1):
+            return model.predict(boosting_rows(example))
+
+    return predict
+
+
+def fit_critic(train: Sequence[Advantages], net: dict, epochs: int,
+               seed: int) -> Callable[[Advantages], np.ndarray]:
+    """The method's critic network, trained offline: its per-state centred output fits the
+    centred labels (the training's Huber loss over the labelled actions)."""
+    import torch
+
+    from tsac_bench.solvers.tsac.net import NetConfig, QNet
+    from tsac_bench.solvers.tsac.sac import LabelledBatch
+
+    torch.manual_seed(seed)
+    critic = QNet(NetConfig(**net))
+    optimizer = torch.optim.Adam(critic.parameters(), lr=1e-3)
+    labelled = [e.item for e in train]
+    rng = np.random.default_rng(seed)
+    for _ in range(epochs):
+        order = rng.permutation(len(labelled))
+        for start in range(0, len(order), 64):
+            batch = LabelledBatch.of([labelled[i] for i in order[start:start + 64]], "cpu")
+            q = critic(batch.states)
+            mask = batch.label_mask
+            centred = q - (q * mask).sum(1, keepdim=True) / mask.sum(1, keepdim=True)
+            loss = torch.nn.functional.huber_loss(centred[mask], batch.labels[mask])
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+    critic.eval()
+
+    def predict(example: Advantages) -> np.ndarray:
+        from tsac_bench.solvers.tsac.net import collate
+
+        with torch.no_grad():
+            q = critic(collate([example.state], "cpu"))[0].numpy()
+        return q[list(example.actions)] - q[example.reference]
+
+    return predict
+
+
+def run_held_out(args: argparse.Namespace) -> list[str]:
+    import torch
+
+    torch.set_num_threads(1)
+    examples: list[Advantages] = []
+    net = None
+    for run in args.runs:
+        checkpoint = torch.load(Path(run) / "checkpoint.pt", weights_only=False,
+                                map_location="cpu")
+        net = net or checkpoint["config"]["net"]
+        for item in checkpoint["buffer"]:
+            example = Advantages.of(item) if hasattr(item, "q") else None
+            if example is not None:
+                examples.append(example)
+    cut = int(args.train_share * len(examples))
+    train, test = examples[:cut], examples[cut:]
+    truth = [e.gains for e in test]
+    oracle = np.mean([max(0.0, g.max()) for g in truth])
+    uniform = np.mean([g.mean() for g in truth])
+    lines = [
+        f"Labelled states with HOCF's choice labelled: {len(examples)}; trained on the first "
+        f"{len(train)} (or the last quarter / half of them), tested on the last {len(test)}. "
+        f"On the test states, the best labelled action gains {oracle:+.3f} J per state "
+        f"against HOCF's label (the labels' own look-ahead, noise included), a uniformly "
+        f"drawn other action {uniform:+.3f} J.",
+        "",
+        "| model | training states | "
+        + " | ".join(f"tau {tau:g}: gain per state, 95 % (deviations)" for tau in TAUS) + " |",
+        "|---|---:|" + "---:|" * len(TAUS),
+    ]
+    fits = {"gradient boosting": lambda part: fit_boosting(part, args.seed),
+            "transformer critic": lambda part: fit_critic(part, net, args.epochs, args.seed)}
+    for name, fit in fits.items():
+        for size in (len(train) // 4, len(train) // 2, len(train)):
+            predict = fit(train[len(train) - size:])
+            predicted = [predict(e) for e in test]
+            cells = []
+            for tau in TAUS:
+                gain, half_width, deviations = deviation_gain(predicted, truth, tau)
+                cells.append(f"{gain:+.3f} +- {half_width:.3f} J ({deviations})")
+            lines.append(f"| {name} | {size} | " + " | ".join(cells) + " |")
+            print(lines[-1], flush=True)
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=None)
+    parts = parser.add_subparsers(dest="part", required=True)
+    repeat = parts.add_parser("repeat")
+    repeat.add_argument("--scale", default="16/40")
+    repeat.add_argument("--instances", type=int, default=10)
+    repeat.add_argument("--share", type=float, default=0.1)
+    repeat.add_argument("--candidates", type=int, default=16)
+    repeat.add_argument("--rollouts", type=int, default=4)
+    repeat.add_argument("--workers", type=int, default=1)
+    held_out = parts.add_parser("held-out")
+    held_out.add_argument("runs", nargs="+", help="training run folders (their checkpoint.pt)")
+    held_out.add_argument("--train-share", type=float, default=0.75)
+    held_out.add_argument("--epochs", type=int, default=30)
+    held_out.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    if args.part == "repeat" and hasattr(os, "sched_setaffinity") and args.workers == 1:
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    lines = run_repeat(args) if args.part == "repeat" else run_held_out(args)
+    print("\n".join(lines))
+    if args.out is not None:
+        command = "python benchmarks/tsac_learnability.py " + shlex.join(sys.argv[1:])
+        args.out.write_text("\n".join([
+            f"Command: `{command}`  ",
+            f"Machine: {platform.processor() or platform.machine()}, Python "
+            f"{platform.python_version()}.", "", *lines, ""]))
+
+
+if __name__ == "__main__":
+    main()

@@ -25,16 +25,13 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
 
       python benchmarks/tsac_learnability.py held-out results/teacher-kl-0.3-long [RUN ...]
 
-Both print their table; ``--out FILE`` also writes it as markdown.
+Both print their table (markdown) last.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import platform
-import shlex
-import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,11 +63,10 @@ TAUS = (0.0, 0.25, 0.5, 1.0)
 def teacher_action(state: Observation) -> int:
     """HOCF's choice as an action index (feature set 3: the teacher-choice column; no row
     set means HOCF passes, action 0)."""
-    from tsac_bench.solvers.tsac.env import TEACHER_FEATURES
+    from tsac_bench.solvers.tsac.env import FEATURE_SETS, TEACHER_CHOICE_COLUMN
 
-    column = TEACHER_FEATURES.index("teacher_choice") - len(TEACHER_FEATURES)
-    chosen = np.flatnonzero(state.tasks[:, column])
-    return 0 if len(chosen) == 0 else 1 + int(chosen[0])
+    chosen = np.flatnonzero(state.tasks[:, TEACHER_CHOICE_COLUMN])
+    return 0 if len(chosen) == 0 else FEATURE_SETS[3].offset + int(chosen[0])
 
 
 @dataclass(frozen=True)
@@ -238,8 +234,10 @@ def fit_boosting(train: Sequence[Advantages], seed: int) -> Callable[[Advantages
 
 def fit_critic(train: Sequence[Advantages], net: dict, epochs: int,
                seed: int) -> Callable[[Advantages], np.ndarray]:
-    """The method's critic network, trained offline: its per-state centred output fits the
-    centred labels (the training's Huber loss over the labelled actions)."""
+    """The method's critic network, trained offline on the Huber loss over the labelled
+    actions, as in training, but with its output centred per state over them like the
+    labels (training regresses the output itself: its actor is blind to a per-state
+    constant, and so is ``deviation_gain``)."""
     import torch
 
     from tsac_bench.solvers.tsac.net import NetConfig, QNet
@@ -320,7 +318,6 @@ def run_held_out(args: argparse.Namespace) -> list[str]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=None)
     parts = parser.add_subparsers(dest="part", required=True)
     repeat = parts.add_parser("repeat")
     repeat.add_argument("--scale", default="16/40")
@@ -339,12 +336,6 @@ def main() -> None:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     lines = run_repeat(args) if args.part == "repeat" else run_held_out(args)
     print("\n".join(lines))
-    if args.out is not None:
-        command = "python benchmarks/tsac_learnability.py " + shlex.join(sys.argv[1:])
-        args.out.write_text("\n".join([
-            f"Command: `{command}`  ",
-            f"Machine: {platform.processor() or platform.machine()}, Python "
-            f"{platform.python_version()}.", "", *lines, ""]))
 
 
 if __name__ == "__main__":

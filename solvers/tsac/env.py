@@ -70,6 +70,9 @@ EXTRA_TASK_FEATURES = ("dx", "dy", "coverable_share", "route_distance", "own_lat
 #: could add. With the teacher's choice in the state, following HOCF is one weight, and
 #: what the critic has to learn is where to deviate from it.
 TEACHER_FEATURES = ("teacher_priority", "teacher_choice")
+#: Where the teacher-choice column sits in a task row, counted from its end (the teacher
+#: columns close the row).
+TEACHER_CHOICE_COLUMN = TEACHER_FEATURES.index("teacher_choice") - len(TEACHER_FEATURES)
 
 
 def _scales(names: Sequence[str], table: Mapping[str, float]) -> np.ndarray:

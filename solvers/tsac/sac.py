@@ -69,7 +69,7 @@ from tsac_bench.solvers.tsac.env import (
     AGENT_DIM,
     DEPOT_DIM,
     FEATURE_SETS,
-    TEACHER_FEATURES,
+    TEACHER_CHOICE_COLUMN,
     FeatureSet,
     MomentSampler,
     Observation,
@@ -323,9 +323,6 @@ class LabelledBatch:
 #: teacher's choice): the KL stays finite, and deviating from the teacher costs
 #: log((1 - e) |valid| / e), about 5.3 units of ``teacher_prior`` with 10 valid actions.
 TEACHER_PRIOR_SPREAD = 0.05
-#: Where the teacher-choice column sits in a task row, counted from its end (the teacher
-#: columns close the row).
-_CHOICE_COLUMN = TEACHER_FEATURES.index("teacher_choice") - len(TEACHER_FEATURES)
 
 
 def teacher_prior_of(states: dict[str, Tensor]) -> Tensor:
@@ -333,7 +330,7 @@ def teacher_prior_of(states: dict[str, Tensor]) -> Tensor:
     validity mask): ``1 - TEACHER_PRIOR_SPREAD`` on the task row whose teacher-choice column
     (feature set 3) is set, the rest uniform over the valid actions."""
     mask = states["action_mask"]
-    choice = states["tasks"][..., _CHOICE_COLUMN]
+    choice = states["tasks"][..., TEACHER_CHOICE_COLUMN]
     if "pass_token" in states:
         choice = torch.cat([torch.zeros_like(choice[:, :1]), choice], dim=1)
     valid = mask.float()

@@ -25,6 +25,16 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
 
       python benchmarks/tsac_learnability.py held-out results/teacher-kl-0.3-long [RUN ...]
 
+* ``margin``: what a training run's values are worth in whole games. HOCF's game (dynamic
+  mode, the first instances of ``instances/paper-mc/``) in which each decision deviates from
+  HOCF's choice to the action of highest value where that value exceeds HOCF's choice's by
+  more than ``tau`` J; the value is the minimum of the run's twin critics (``critic``) or the
+  actor's logits less the teacher prior's log-probabilities times the run's
+  ``teacher_prior`` weight (``actor``: the critic the KL-regularised actor implies). Paired
+  against HOCF's J per instance.
+
+      python benchmarks/tsac_learnability.py margin results/teacher-kl-0.3-r16-long --scale 32/80
+
 Both print their table (markdown) last.
 """
 
@@ -32,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,8 +60,11 @@ from tsac_bench.solvers.ocf.engine import (
     SelectionRule,
     sample_rng,
 )
+from tsac_bench.solvers.ocf.hocf import HOCFAllocator
 
 if TYPE_CHECKING:  # torch is loaded where it is used
+    import torch
+
     from tsac_bench.solvers.tsac.env import Observation
     from tsac_bench.solvers.tsac.sac import Labelled, RolloutWorkers
 
@@ -316,6 +330,111 @@ def run_held_out(args: argparse.Namespace) -> list[str]:
     return lines
 
 
+# ----------------------------------------------------------------------------- margin
+
+
+def margin_choice(values: np.ndarray, valid: np.ndarray, teacher: int, tau: float) -> int:
+    """The valid action of highest value if it beats the teacher's (a valid action) by more
+    than ``tau``, else the teacher's."""
+    best = int(np.argmax(np.where(valid, values, -np.inf)))
+    return best if values[best] - values[teacher] > tau else teacher
+
+
+class MarginSelection:
+    """Selection rule: HOCF's choice unless a value network (``score``: observation batch ->
+    one value per action, in J) rates another valid action more than ``tau`` above it."""
+
+    def __init__(self, score: Callable[[dict[str, torch.Tensor]], torch.Tensor],
+                 tau: float) -> None:
+        from tsac_bench.solvers.tsac.env import FEATURE_SETS
+
+        self.score, self.tau, self.features = score, tau, FEATURE_SETS[3]
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
+        import torch
+
+        from tsac_bench.solvers.tsac.env import action_choice, observe
+        from tsac_bench.solvers.tsac.net import collate
+
+        del rng
+        state = observe(view, self.features)
+        with torch.inference_mode():
+            values = self.score(collate([state]))[0].double().numpy()
+        action = margin_choice(values, state.action_mask, teacher_action(state), self.tau)
+        return action_choice(view, action, self.features)
+
+
+def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]], torch.Tensor]]:
+    """The two value functions of a training run's checkpoint (see ``margin``)."""
+    import torch
+
+    from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet
+    from tsac_bench.solvers.tsac.sac import teacher_prior_of
+
+    net = NetConfig(**checkpoint["config"]["net"])
+    critics = [QNet(net) for _ in checkpoint["sac"]["critics"]]
+    for critic, weights in zip(critics, checkpoint["sac"]["critics"], strict=True):
+        critic.load_state_dict(weights)
+        critic.eval()
+    actor = PolicyNet(net)
+    actor.load_state_dict(checkpoint["sac"]["actor"])
+    actor.eval()
+    weight = checkpoint["config"]["teacher_prior"]
+    return {"critic": lambda obs: torch.minimum(*(critic(obs) for critic in critics)),
+            "actor": lambda obs: weight * (actor(obs) - teacher_prior_of(obs))}
+
+
+class MarginAllocator(HOCFAllocator):
+    def __init__(self, score: Callable[[dict[str, torch.Tensor]], torch.Tensor],
+                 tau: float) -> None:
+        super().__init__()
+        self.score, self.tau = score, tau
+
+    def rule(self, state: PlanningState) -> SelectionRule:
+        del state
+        return MarginSelection(self.score, self.tau)
+
+
+def run_margin(args: argparse.Namespace) -> list[str]:
+    import torch
+    from paper_reproduction import instance_files
+
+    from tsac_bench.planning.solve import solve
+
+    torch.set_num_threads(1)
+    checkpoint = torch.load(Path(args.run) / "checkpoint.pt", weights_only=False,
+                            map_location="cpu")
+    if checkpoint["config"]["teacher_prior"] <= 0:
+        raise SystemExit(f"{args.run}: margin needs a run with teacher_prior > 0")
+    scores = run_scores(checkpoint)
+    instances = [read_instance(path) for path in instance_files(args.scale, args.instances)]
+    hocf = [solve(i, "hocf", seed=0, mode="dynamic").cost for i in instances]
+    lines = [f"Dynamic mode, the first {args.instances} instances of `instances/paper-mc/` "
+             f"at {args.scale}, method seed 0; HOCF's mean J {np.mean(hocf):.2f}. d = J(row) "
+             "- J(HOCF) per instance (negative: cheaper).",
+             "",
+             "| scale | value | tau | mean J | mean d, 95 % | mean d / mean J(HOCF) | "
+             "lower / higher | mean wall (s) |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for name in args.score:
+        for tau in args.tau:
+            allocator = MarginAllocator(scores[name], tau)
+            costs, walls = [], []
+            for instance in instances:
+                began = time.perf_counter()
+                costs.append(solve(instance, allocator, seed=0, mode="dynamic").cost)
+                walls.append(time.perf_counter() - began)
+            d = np.subtract(costs, hocf)
+            half = 1.96 * float(np.std(d, ddof=1)) / np.sqrt(len(d))
+            lines.append(f"| {args.scale} | {name} | {tau:g} | {np.mean(costs):.2f} | "
+                         f"{d.mean():+.2f} +- {half:.2f} | "
+                         f"{100 * d.mean() / np.mean(hocf):+.1f} % | "
+                         f"{int((d < 0).sum())} / {int((d > 0).sum())} | "
+                         f"{np.mean(walls):.2f} |")
+            print(lines[-1], flush=True)
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parts = parser.add_subparsers(dest="part", required=True)
@@ -331,10 +450,21 @@ def main() -> None:
     held_out.add_argument("--train-share", type=float, default=0.75)
     held_out.add_argument("--epochs", type=int, default=30)
     held_out.add_argument("--seed", type=int, default=0)
+    margin = parts.add_parser("margin")
+    margin.add_argument("run", help="a training run folder (its checkpoint.pt)")
+    margin.add_argument("--scale", default="16/40")
+    margin.add_argument("--instances", type=int, default=100)
+    margin.add_argument("--tau", type=float, action="append", default=None)
+    margin.add_argument("--score", choices=("critic", "actor"), action="append", default=None)
     args = parser.parse_args()
-    if args.part == "repeat" and hasattr(os, "sched_setaffinity") and args.workers == 1:
+    if args.part == "margin":
+        args.tau = args.tau or [0.5, 1.0]
+        args.score = args.score or ["critic", "actor"]
+    if (args.part == "margin" or (args.part == "repeat" and args.workers == 1)) and hasattr(
+            os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-    lines = run_repeat(args) if args.part == "repeat" else run_held_out(args)
+    run = {"repeat": run_repeat, "held-out": run_held_out, "margin": run_margin}[args.part]
+    lines = run(args)
     print("\n".join(lines))
 
 

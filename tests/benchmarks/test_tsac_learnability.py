@@ -114,3 +114,39 @@ def test_the_repeated_labels_leave_hocfs_game_as_it_is() -> None:
     assert game.cost == plain.cost
     assert len(rule.pairs) > 0
     assert all(len(first) == len(second) <= 3 for first, second in rule.pairs)
+
+
+def test_margin_choice_deviates_only_beyond_tau_and_never_to_an_invalid_action() -> None:
+    values = np.array([1.0, 0.25, 0.5, 5.0])
+    valid = np.array([True, True, True, False])
+    assert tl.margin_choice(values, valid, teacher=1, tau=0.5) == 0  # 0.75 above the teacher
+    assert tl.margin_choice(values, valid, teacher=1, tau=1.0) == 1
+    assert tl.margin_choice(values, valid, teacher=0, tau=-1.0) == 0
+
+
+@pytest.mark.parametrize("tau", [float("inf"), -1.0])
+def test_margin_selection_plays_hocfs_game_when_it_keeps_or_values_the_teachers_choice(
+        tau) -> None:
+    """tau = inf: never deviates; tau = -1 with the teacher-choice column as the value (0
+    for the pass): always takes the best value, which is HOCF's choice. Both: HOCF's J."""
+    import torch
+
+    from tsac_bench.model.generator import generate
+    from tsac_bench.planning.solve import solve
+    from tsac_bench.solvers.tsac.env import TEACHER_CHOICE_COLUMN
+
+    def teacher_column(obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        choice = obs["tasks"][..., TEACHER_CHOICE_COLUMN]
+        return torch.cat([torch.zeros_like(choice[:, :1]), choice], dim=1)
+
+    def contrary(obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        return -teacher_column(obs)
+
+    instance = generate("8/20", 5)
+    hocf = solve(instance, "hocf", seed=0, mode="dynamic").cost
+    score = contrary if tau == float("inf") else teacher_column
+    played = solve(instance, tl.MarginAllocator(score, tau), seed=0, mode="dynamic").cost
+    assert played == hocf
+    # Preferring anything but HOCF's choice plays another game.
+    other = solve(instance, tl.MarginAllocator(contrary, -1.0), seed=0, mode="dynamic").cost
+    assert other != hocf

@@ -31,7 +31,8 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
   more than ``tau`` J; the value is the minimum of the run's twin critics (``critic``) or the
   actor's logits less the teacher prior's log-probabilities times the run's
   ``teacher_prior`` weight (``actor``: the critic the KL-regularised actor implies). Paired
-  against HOCF's J per instance.
+  against HOCF's J per instance. ``--first-seed`` plays generated instances instead, apart
+  from the evaluation's, to choose tau on.
 
       python benchmarks/tsac_learnability.py margin results/teacher-kl-0.3-r16-long --scale 32/80
 
@@ -399,6 +400,7 @@ def run_margin(args: argparse.Namespace) -> list[str]:
     import torch
     from paper_reproduction import instance_files
 
+    from tsac_bench.model.generator import generate
     from tsac_bench.planning.solve import solve
 
     torch.set_num_threads(1)
@@ -407,11 +409,16 @@ def run_margin(args: argparse.Namespace) -> list[str]:
     if checkpoint["config"]["teacher_prior"] <= 0:
         raise SystemExit(f"{args.run}: margin needs a run with teacher_prior > 0")
     scores = run_scores(checkpoint)
-    instances = [read_instance(path) for path in instance_files(args.scale, args.instances)]
+    if args.first_seed is None:
+        instances = [read_instance(path) for path in instance_files(args.scale, args.instances)]
+        source = f"the first {args.instances} instances of `instances/paper-mc/`"
+    else:  # held-out instances apart from paper-mc's, to choose tau on
+        seeds = range(args.first_seed, args.first_seed + args.instances)
+        instances = [generate(args.scale, seed) for seed in seeds]
+        source = f"generated instances of seeds {seeds.start}..{seeds.stop - 1}"
     hocf = [solve(i, "hocf", seed=0, mode="dynamic").cost for i in instances]
-    lines = [f"Dynamic mode, the first {args.instances} instances of `instances/paper-mc/` "
-             f"at {args.scale}, method seed 0; HOCF's mean J {np.mean(hocf):.2f}. d = J(row) "
-             "- J(HOCF) per instance (negative: cheaper).",
+    lines = [f"Dynamic mode, {source} at {args.scale}, method seed 0; HOCF's mean J "
+             f"{np.mean(hocf):.2f}. d = J(row) - J(HOCF) per instance (negative: cheaper).",
              "",
              "| scale | value | tau | mean J | mean d, 95 % | mean d / mean J(HOCF) | "
              "lower / higher | mean wall (s) |",
@@ -454,6 +461,8 @@ def main() -> None:
     margin.add_argument("run", help="a training run folder (its checkpoint.pt)")
     margin.add_argument("--scale", default="16/40")
     margin.add_argument("--instances", type=int, default=100)
+    margin.add_argument("--first-seed", type=int, default=None,
+                        help="generated instances from this seed instead of paper-mc's")
     margin.add_argument("--tau", type=float, action="append", default=None)
     margin.add_argument("--score", choices=("critic", "actor"), action="append", default=None)
     args = parser.parse_args()

@@ -386,6 +386,8 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
 
 
 class MarginAllocator(HOCFAllocator):
+    """HOCF with ``MarginSelection`` as its rule: HOCF's AAV orders, start and budget."""
+
     def __init__(self, score: Callable[[dict[str, torch.Tensor]], torch.Tensor],
                  tau: float) -> None:
         super().__init__()

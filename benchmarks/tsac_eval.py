@@ -33,6 +33,7 @@ from tsac_bench.model.generator import generate
 from tsac_bench.model.io import read_instance
 from tsac_bench.planning import PlanningState, make_allocator
 from tsac_bench.planning.solve import solve
+from tsac_bench.reporting.stats import normal_half_width
 from tsac_bench.solvers.ocf.engine import INIT, SAMPLES, DecisionView, SelectionRule
 from tsac_bench.solvers.ocf.hocf import HOCFAllocator
 from tsac_bench.solvers.ocf.rocf import UniformSelection
@@ -108,8 +109,7 @@ def paired_rows(scale: str, costs: dict[str, list[float]], reference: str) -> li
             continue
         diffs = [v - b for v, b in zip(values, base, strict=True)]
         mean = statistics.fmean(diffs)
-        half = (1.96 * statistics.stdev(diffs) / len(diffs) ** 0.5 if len(diffs) > 1
-                else float("nan"))
+        half = normal_half_width(diffs)
         rows.append(f"| {scale} | {label} | {mean:+.2f} | [{mean - half:+.2f}, "
                     f"{mean + half:+.2f}] | {100 * mean / statistics.fmean(base):+.1f} % | "
                     f"{sum(d < 0 for d in diffs)} / {sum(d > 0 for d in diffs)} |")

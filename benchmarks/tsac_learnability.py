@@ -36,7 +36,7 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
 
       python benchmarks/tsac_learnability.py margin results/teacher-kl-0.3-r16-long --scale 32/80
 
-Both print their table (markdown) last.
+Each prints its table (markdown) last.
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ import numpy as np
 
 from tsac_bench.model.io import read_instance
 from tsac_bench.planning import PlanningState, make_allocator
+from tsac_bench.reporting.stats import normal_half_width
 from tsac_bench.solvers.ocf.engine import (
     C_MAX,
     K_MAX,
@@ -123,8 +124,7 @@ def deviation_gain(predicted: Sequence[np.ndarray], true: Sequence[np.ndarray],
             deviations += 1
         else:
             gains.append(0.0)
-    half_width = 1.96 * float(np.std(gains, ddof=1)) / np.sqrt(len(gains))
-    return float(np.mean(gains)), half_width, deviations
+    return float(np.mean(gains)), normal_half_width(gains), deviations
 
 
 # ----------------------------------------------------------------------------- repeat
@@ -369,20 +369,15 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
     """The two value functions of a training run's checkpoint (see ``margin``)."""
     import torch
 
-    from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet
-    from tsac_bench.solvers.tsac.sac import teacher_prior_of
+    from tsac_bench.solvers.tsac.sac import DiscreteSAC, TrainConfig, teacher_prior_of
 
-    net = NetConfig(**checkpoint["config"]["net"])
-    critics = [QNet(net) for _ in checkpoint["sac"]["critics"]]
-    for critic, weights in zip(critics, checkpoint["sac"]["critics"], strict=True):
-        critic.load_state_dict(weights)
-        critic.eval()
-    actor = PolicyNet(net)
-    actor.load_state_dict(checkpoint["sac"]["actor"])
-    actor.eval()
-    weight = checkpoint["config"]["teacher_prior"]
-    return {"critic": lambda obs: torch.minimum(*(critic(obs) for critic in critics)),
-            "actor": lambda obs: weight * (actor(obs) - teacher_prior_of(obs))}
+    config = TrainConfig.from_dict(checkpoint["config"])
+    sac = DiscreteSAC(config.net, config.sac, "cpu", config.teacher_prior)
+    sac.load_state_dict(checkpoint["sac"])
+    for network in (sac.actor, *sac.critics):
+        network.eval()
+    return {"critic": lambda obs: torch.minimum(*(critic(obs) for critic in sac.critics)),
+            "actor": lambda obs: sac.teacher_prior * (sac.actor(obs) - teacher_prior_of(obs))}
 
 
 class MarginAllocator(HOCFAllocator):
@@ -419,8 +414,12 @@ def run_margin(args: argparse.Namespace) -> list[str]:
         instances = [generate(args.scale, seed) for seed in seeds]
         source = f"generated instances of seeds {seeds.start}..{seeds.stop - 1}"
     hocf = [solve(i, "hocf", seed=0, mode="dynamic").cost for i in instances]
-    lines = [f"Dynamic mode, {source} at {args.scale}, method seed 0; HOCF's mean J "
-             f"{np.mean(hocf):.2f}. d = J(row) - J(HOCF) per instance (negative: cheaper).",
+    footing = make_allocator("hocf").settings()
+    lines = [f"Dynamic mode, {source} at {args.scale}, method seed 0; every row is HOCF's "
+             f"game with its start ({footing['init']}), games per plan call "
+             f"({footing['samples']}) and budget (k_max {footing['k_max']}, c_max "
+             f"{footing['c_max']}, no time limit); HOCF's mean J {np.mean(hocf):.2f}. d = "
+             "J(row) - J(HOCF) per instance (negative: cheaper).",
              "",
              "| scale | value | tau | mean J | mean d, 95 % | mean d / mean J(HOCF) | "
              "lower / higher | mean wall (s) |",
@@ -434,9 +433,8 @@ def run_margin(args: argparse.Namespace) -> list[str]:
                 costs.append(solve(instance, allocator, seed=0, mode="dynamic").cost)
                 walls.append(time.perf_counter() - began)
             d = np.subtract(costs, hocf)
-            half = 1.96 * float(np.std(d, ddof=1)) / np.sqrt(len(d))
             lines.append(f"| {args.scale} | {name} | {tau:g} | {np.mean(costs):.2f} | "
-                         f"{d.mean():+.2f} +- {half:.2f} | "
+                         f"{d.mean():+.2f} +- {normal_half_width(d):.2f} | "
                          f"{100 * d.mean() / np.mean(hocf):+.1f} % | "
                          f"{int((d < 0).sum())} / {int((d > 0).sum())} | "
                          f"{np.mean(walls):.2f} |")

@@ -301,3 +301,11 @@ def test_the_report_carries_no_absolute_path(run_dir, tmp_path, monkeypatch):
     assert "- results store: `../../run/results.sqlite` (relative to this report)" in index
     assert "- command: `tsac-bench run instances --out run`" in index
     assert "- `i1|D|static|0`: error: InputError: instances/i1.json: bad" in index
+
+
+def test_normal_half_width_is_1_96_standard_errors_and_nan_below_two_values() -> None:
+    from tsac_bench.reporting.stats import normal_half_width
+
+    # Sample standard deviation of (1, 2, 3) is 1: 1.96 / sqrt(3).
+    assert normal_half_width([1.0, 2.0, 3.0]) == pytest.approx(1.131607, abs=1e-6)
+    assert math.isnan(normal_half_width([4.0]))

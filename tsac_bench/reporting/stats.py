@@ -30,6 +30,15 @@ TIE_TOLERANCE = 1e-9
 SGM_SHIFT = 1.0
 
 
+def normal_half_width(values: Sequence[float] | np.ndarray) -> float:
+    """Half-width of the normal-approximation 95 % interval of the mean of ``values``: 1.96
+    sample standard deviations over sqrt(n); nan for fewer than two values."""
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return float("nan")
+    return 1.96 * float(np.std(values, ddof=1)) / float(np.sqrt(len(values)))
+
+
 def shifted_geometric_mean(values: Sequence[float] | np.ndarray,
                            shift: float = SGM_SHIFT) -> float:
     """exp(mean(ln(x + shift))) - shift; NaN for no values."""

@@ -4,11 +4,13 @@ Mean and median J (the evaluator's, of the executed routes) per scale and method
 reduction of TSAC-OCF's mean J against HOCF's (the paper: 39.76 % at 32/80), and per-instance
 wins. Every row states its start (``init``) and games per plan call (``samples``): the OCF
 methods share their defaults (``solvers/ocf/engine.py``), so a comparison is on equal footing
-unless a row says otherwise. Extra rows: other policy files (``--ablation``), the
-"incumbent" start (``--incumbent-rows``), sampling temperatures (``--temperatures``), the
-noise control (``--noise-control SHARE``: HOCF deviating to a uniformly drawn candidate in
-that share of its decisions, what a policy that follows HOCF elsewhere gains by deviating
-at random). Run by hand:
+unless a row says otherwise. Extra rows: the sampled actors of policy files (``--ablation``;
+the ``tsac-ocf`` row decodes the shipped policy by its default, ``margin``), any method
+spec (``--row``, e.g. ``tsac-ocf:decode=margin``), the "incumbent" start
+(``--incumbent-rows``), sampling temperatures (``--temperatures``), the noise control
+(``--noise-control SHARE``: HOCF deviating to a uniformly drawn candidate in that share of
+its decisions, what a policy that follows HOCF elsewhere gains by deviating at random).
+Run by hand:
     python benchmarks/tsac_eval.py [--instances 10] [--first-seed 900000] [--policy FILE]
 Writes reports/tsac-eval.md (or ``--out``). Held-out instances: generator seeds
 first-seed .. first-seed + instances - 1 (training draws its instance seeds from a generator
@@ -74,15 +76,20 @@ class NoiseControl(HOCFAllocator):
 
 def variants(policy: str | None, ablations: list[str], *, incumbent: bool,
              temperatures: bool, baselines: tuple[str, ...] = BASELINES,
-             noise: tuple[float, ...] = ()) -> list[tuple[str, str | HOCFAllocator, dict]]:
+             noise: tuple[float, ...] = (), specs: tuple[str, ...] = ()
+             ) -> list[tuple[str, str | HOCFAllocator, dict]]:
     tsac = {"policy": policy} if policy else {}
     rows = [*((name, name, {}) for name in baselines), ("tsac-ocf", "tsac-ocf", tsac)]
     if temperatures:
-        rows += [("tsac-ocf T=0.5", "tsac-ocf", {**tsac, "temperature": 0.5}),
-                 ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**tsac, "temperature": 0.0})]
+        sampled = {**tsac, "decode": "sample"}
+        rows += [("tsac-ocf T=0.5", "tsac-ocf", {**sampled, "temperature": 0.5}),
+                 ("tsac-ocf T=0 (argmax)", "tsac-ocf", {**sampled, "temperature": 0.0})]
     for item in ablations:
         label, _, path = item.partition("=")
-        rows.append((label, "tsac-ocf", {"policy": path}))
+        rows.append((label, "tsac-ocf", {"policy": path, "decode": "sample"}))
+    for item in specs:
+        label, _, spec = item.partition("=")
+        rows.append((label, spec, {}))
     if incumbent:
         rows += [("hocf init=incumbent", "hocf", {"init": "incumbent"}),
                  ("tsac-ocf init=incumbent", "tsac-ocf", {**tsac, "init": "incumbent"})]
@@ -126,7 +133,9 @@ def main() -> None:
     parser.add_argument("--policy", default=None, help="policy file (default: shipped)")
     parser.add_argument("--scales", nargs="+", default=list(SCALES))
     parser.add_argument("--ablation", action="append", default=[], metavar="LABEL=FILE",
-                        help="an extra tsac-ocf row with another policy file")
+                        help="an extra tsac-ocf row: the actor of a policy file, sampled")
+    parser.add_argument("--row", action="append", default=[], metavar="LABEL=SPEC",
+                        help="an extra row: a method spec NAME[:KEY=VALUE...]")
     parser.add_argument("--incumbent-rows", action="store_true",
                         help="add hocf and tsac-ocf rows started from the incumbent plan")
     parser.add_argument("--temperatures", action="store_true",
@@ -148,7 +157,7 @@ def main() -> None:
     labels = [label for label, _, _ in variants(
         args.policy, args.ablation, incumbent=args.incumbent_rows,
         temperatures=args.temperatures, baselines=baselines,
-        noise=tuple(args.noise_control))]
+        noise=tuple(args.noise_control), specs=tuple(args.row))]
     for reference in args.paired:
         if reference not in labels:
             parser.error(f"--paired: no row {reference!r}; the rows: {', '.join(labels)}")
@@ -161,6 +170,7 @@ def main() -> None:
                + f" --scales {' '.join(args.scales)}"
                + ("" if baselines == BASELINES else f" --baselines {' '.join(baselines)}")
                + "".join(f" --ablation {shlex.quote(a)}" for a in args.ablation)
+               + "".join(f" --row {shlex.quote(r)}" for r in args.row)
                + (" --incumbent-rows" if args.incumbent_rows else "")
                + (" --temperatures" if args.temperatures else "")
                + "".join(f" --noise-control {share:g}" for share in args.noise_control)
@@ -200,7 +210,7 @@ def main() -> None:
         walls: dict[str, list[float]] = {}
         rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,
                         temperatures=args.temperatures, baselines=baselines,
-                        noise=tuple(args.noise_control))
+                        noise=tuple(args.noise_control), specs=tuple(args.row))
         starts = {label: footing(method, settings) for label, method, settings in rows}
         for label, method, settings in rows:
             for instance in instances:

@@ -76,15 +76,6 @@ TAUS = (0.0, 0.25, 0.5, 1.0)
 # ----------------------------------------------------------------- labels and their gains
 
 
-def teacher_action(state: Observation) -> int:
-    """HOCF's choice as an action index (feature set 3: the teacher-choice column; no row
-    set means HOCF passes, action 0)."""
-    from tsac_bench.solvers.tsac.env import FEATURE_SETS, TEACHER_CHOICE_COLUMN
-
-    chosen = np.flatnonzero(state.tasks[:, TEACHER_CHOICE_COLUMN])
-    return 0 if len(chosen) == 0 else FEATURE_SETS[3].offset + int(chosen[0])
-
-
 @dataclass(frozen=True)
 class Advantages:
     """A labelled state's other labelled actions and their labels less HOCF's (in J:
@@ -98,6 +89,8 @@ class Advantages:
     @classmethod
     def of(cls, item: Labelled) -> Advantages | None:
         """None where HOCF's choice was not labelled or nothing else was."""
+        from tsac_bench.solvers.tsac.env import teacher_action
+
         reference = teacher_action(item.state)
         if reference not in item.actions or len(item.actions) < 2:
             return None
@@ -334,41 +327,9 @@ def run_held_out(args: argparse.Namespace) -> list[str]:
 # ----------------------------------------------------------------------------- margin
 
 
-def margin_choice(values: np.ndarray, valid: np.ndarray, teacher: int, tau: float) -> int:
-    """The valid action of highest value if it beats the teacher's (a valid action) by more
-    than ``tau``, else the teacher's."""
-    best = int(np.argmax(np.where(valid, values, -np.inf)))
-    return best if values[best] - values[teacher] > tau else teacher
-
-
-class MarginSelection:
-    """Selection rule: HOCF's choice unless a value network (``score``: observation batch ->
-    one value per action, in J) rates another valid action more than ``tau`` above it."""
-
-    def __init__(self, score: Callable[[dict[str, torch.Tensor]], torch.Tensor],
-                 tau: float) -> None:
-        from tsac_bench.solvers.tsac.env import FEATURE_SETS
-
-        self.score, self.tau, self.features = score, tau, FEATURE_SETS[3]
-
-    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
-        import torch
-
-        from tsac_bench.solvers.tsac.env import action_choice, observe
-        from tsac_bench.solvers.tsac.net import collate
-
-        del rng
-        state = observe(view, self.features)
-        with torch.inference_mode():
-            values = self.score(collate([state]))[0].double().numpy()
-        action = margin_choice(values, state.action_mask, teacher_action(state), self.tau)
-        return action_choice(view, action, self.features)
-
-
 def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]], torch.Tensor]]:
     """The two value functions of a training run's checkpoint (see ``margin``)."""
-    import torch
-
+    from tsac_bench.solvers.tsac.policy import Policy
     from tsac_bench.solvers.tsac.sac import DiscreteSAC, TrainConfig, teacher_prior_of
 
     config = TrainConfig.from_dict(checkpoint["config"])
@@ -376,7 +337,8 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
     sac.load_state_dict(checkpoint["sac"])
     for network in (sac.actor, *sac.critics):
         network.eval()
-    return {"critic": lambda obs: torch.minimum(*(critic(obs) for critic in sac.critics)),
+    policy = Policy(sac.actor, tuple(sac.critics), config.label_scale)
+    return {"critic": policy.values,
             "actor": lambda obs: sac.teacher_prior * (sac.actor(obs) - teacher_prior_of(obs))}
 
 
@@ -389,6 +351,8 @@ class MarginAllocator(HOCFAllocator):
         self.score, self.tau = score, tau
 
     def rule(self, state: PlanningState) -> SelectionRule:
+        from tsac_bench.solvers.tsac.policy import MarginSelection
+
         del state
         return MarginSelection(self.score, self.tau)
 

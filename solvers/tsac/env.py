@@ -154,6 +154,13 @@ def action_choice(view: DecisionView, action: int, features: FeatureSet) -> int:
     return view.game.visible[action - features.offset]
 
 
+def teacher_action(observation: Observation) -> int:
+    """HOCF's choice as an action index of a feature-set-3 state (its teacher-choice column;
+    no row set means HOCF passes, action 0)."""
+    chosen = np.flatnonzero(observation.tasks[:, TEACHER_CHOICE_COLUMN])
+    return 0 if len(chosen) == 0 else FEATURE_SETS[3].offset + int(chosen[0])
+
+
 def observe(view: DecisionView, features: FeatureSet = FEATURE_SETS[1]) -> Observation:
     """The deciding AAV's state, scaled, with its validity mask."""
     game, n = view.game, view.aav

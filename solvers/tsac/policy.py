@@ -2,29 +2,44 @@
 
 The engine of ``solvers/ocf/engine.py`` plays Algorithm 1 (random AAV permutations, ADD/REMOVE,
 strict-improvement acceptance, tabu list); the selection rule here feeds the deciding AAV's
-state (Eq. 20, ``tsac_env.observe``) to a frozen transformer actor and samples the task from
-the masked distribution (Eq. 21) with the engine's seeded generator, so a run is
-deterministic per seed. The default policy ships with the package
-(``solvers/tsac/policies/tsac-default.pt``; how it was trained: docs/tsac.md).
+state (Eq. 20, ``tsac_env.observe``) to the frozen networks of a policy file and decodes a
+task in one of two ways (``decode``):
+
+* ``sample``: m* ~ pi(.|s), the actor's masked distribution (Eq. 21);
+* ``margin``: HOCF's choice (the teacher column of feature set 3) unless the minimum of the
+  run's twin critics rates another valid action more than ``margin`` J above it. Why: the
+  critics of a run trained on rollout labels rank actions well only near the states they
+  were trained on; a deviation they back by a wide margin pays, a close call does not
+  (reports/tsac-learnability.md measures both).
+
+Either way the engine's seeded generator drives the game, so a run is deterministic per seed.
+The default policy ships with the package (``solvers/tsac/policies/tsac-default.pt``, decoded
+by margin; how it was trained and measured: docs/tsac.md); ``tsac-policy-1.pt`` beside it is
+the policy shipped before it (an actor alone, feature set 1: ``decode=sample`` only).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from torch import Tensor
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.planning import (
     ExistingFile,
     Interval,
     NoneOr,
+    Options,
     PlanningState,
     PlanResult,
+    Refused,
     declare,
 )
 from tsac_bench.solvers.ocf.engine import (
@@ -43,34 +58,64 @@ from tsac_bench.solvers.tsac.env import (
     FeatureSet,
     action_choice,
     observe,
+    teacher_action,
 )
-from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate
+from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate
 
 DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
-POLICY_FORMAT = "tsac-bench/policy@1"
+#: Version 2 adds the run's twin critics (``critics``, possibly none) and the J one unit of
+#: their values stands for (``critic_unit``); version 1 files (the actor alone) still load.
+POLICY_FORMAT = "tsac-bench/policy@2"
+_READABLE_FORMATS = ("tsac-bench/policy@1", POLICY_FORMAT)
+#: The margin of ``decode="margin"`` (J), chosen on generated instances apart from the
+#: evaluation's (seeds 900000..900049, reports/tsac-learnability.md).
+MARGIN = 0.75
+#: The feature set the margin rule needs: HOCF's choice is a column of its state.
+MARGIN_FEATURES = FEATURE_SETS[3]
 
 
 class PolicyFileError(TsacBenchError):
     """A policy file that cannot be read or does not fit this version's features."""
 
 
-def save_policy(actor: PolicyNet, path: Path, meta: dict[str, Any]) -> None:
-    """Write the actor alone (no critics, no optimiser): what ``tsac-ocf`` loads."""
+@dataclass(frozen=True)
+class Policy:
+    """A policy file's frozen networks, on the CPU: the actor and, from a run trained on
+    rollout labels, its twin critics, whose values times ``critic_unit`` are J."""
+
+    actor: PolicyNet
+    critics: tuple[QNet, ...] = ()
+    critic_unit: float = 1.0
+
+    def values(self, obs: Mapping[str, Tensor]) -> Tensor:
+        """The pessimistic (minimum) twin-critic value of each action, in J."""
+        return torch.minimum(*(critic(obs) for critic in self.critics)) * self.critic_unit
+
+
+def save_policy(actor: PolicyNet, path: Path, meta: dict[str, Any],
+                critics: Sequence[QNet] = (), critic_unit: float = 1.0) -> None:
+    """Write what ``tsac-ocf`` loads: the actor, and the critics to decode by margin (only
+    critics whose values are final-J differences, ``critic_unit`` J each); no optimiser."""
     path.parent.mkdir(parents=True, exist_ok=True)
     # Plain JSON types only, so that the file loads with weights_only=True.
     meta = json.loads(json.dumps(meta, default=str))
     torch.save({"format": POLICY_FORMAT, "config": actor.config.to_dict(),
-                "actor": actor.state_dict(), "meta": meta}, path)
+                "actor": actor.state_dict(), "critics": [q.state_dict() for q in critics],
+                "critic_unit": float(critic_unit), "meta": meta}, path)
 
 
-def load_policy(path: Path | str = DEFAULT_POLICY) -> PolicyNet:
-    """The frozen actor of a policy file, on the CPU, in evaluation mode."""
+def read_policy(path: Path | str = DEFAULT_POLICY) -> Policy:
+    """The networks of a policy file, frozen; PolicyFileError (one line) if it is not one
+    this version can run."""
     path = Path(path)
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
-    except (OSError, RuntimeError, ValueError) as exc:
-        raise PolicyFileError(f"{path}: cannot read the policy ({exc})") from None
-    if not isinstance(payload, dict) or payload.get("format") != POLICY_FORMAT:
+    # torch's restricted unpickler raises many kinds of error for a file that is not a
+    # torch archive (KeyError, UnpicklingError, EOFError...): all mean "not a policy".
+    except Exception as exc:
+        raise PolicyFileError(f"{path}: cannot read the policy ({type(exc).__name__}: "
+                              f"{exc})") from None
+    if not isinstance(payload, dict) or payload.get("format") not in _READABLE_FORMATS:
         raise PolicyFileError(f"{path}: format: expected {POLICY_FORMAT!r}")
     # Files written before feature set 2 existed carry no "features": they are version 1.
     config = NetConfig(**payload["config"])
@@ -84,19 +129,82 @@ def load_policy(path: Path | str = DEFAULT_POLICY) -> PolicyNet:
             f"{path}: config: the network's inputs (agent {config.agent_dim}, task "
             f"{config.task_dim}, depot {config.depot_dim}, pass {config.pass_action}) do not "
             f"fit feature set {features.version} of this version {shape}: retrain the policy")
-    actor = PolicyNet(config)
+    actor = _frozen(PolicyNet(config), payload["actor"], path, "actor")
+    critics = tuple(_frozen(QNet(config), state, path, "critics")
+                    for state in payload.get("critics", ()))
+    return Policy(actor, critics, float(payload.get("critic_unit", 1.0)))
+
+
+def _frozen(network: PolicyNet | QNet, state: dict[str, Tensor], path: Path,
+            field: str) -> Any:
     try:
-        actor.load_state_dict(payload["actor"])
+        network.load_state_dict(state)
     except RuntimeError as exc:
-        raise PolicyFileError(f"{path}: actor: does not fit this network ({exc})") from None
-    actor.eval()
-    actor.requires_grad_(False)
-    return actor
+        raise PolicyFileError(f"{path}: {field}: does not fit this network ({exc})") from None
+    network.eval()
+    network.requires_grad_(False)
+    return network
+
+
+def load_policy(path: Path | str = DEFAULT_POLICY) -> PolicyNet:
+    """The frozen actor of a policy file, on the CPU, in evaluation mode."""
+    return read_policy(path).actor
 
 
 @cache
-def _cached_policy(path: str) -> PolicyNet:
-    return load_policy(path)
+def _cached_policy(path: str) -> Policy:
+    return read_policy(path)
+
+
+def policy_at(path: str | None) -> Policy:
+    """The policy a ``policy`` setting names (None: the shipped one), read once."""
+    return _cached_policy(str(Path(path) if path else DEFAULT_POLICY))
+
+
+def margin_problem(policy: Policy) -> str | None:
+    """Why ``decode="margin"`` cannot run this policy, or None if it can."""
+    if len(policy.critics) < 2:
+        return "its file carries no twin critics (train it on rollout labels)"
+    if policy.actor.config.features != MARGIN_FEATURES.version:
+        return (f"it is built for feature set {policy.actor.config.features}, the margin "
+                f"rule needs HOCF's choice in the state (feature set "
+                f"{MARGIN_FEATURES.version})")
+    return None
+
+
+class PolicyFile(ExistingFile):
+    """A policy file ``tsac-ocf`` can run (read here, so that a bad one is a bad setting)."""
+
+    def convert(self, value: Any) -> Any:
+        path = super().convert(value)
+        try:
+            policy_at(path)
+        except PolicyFileError as exc:
+            raise Refused(str(exc)) from None
+        return path
+
+    def describe(self, context: Mapping[str, Any]) -> str:
+        return "the path of a tsac-ocf policy file"
+
+
+class Decoding(Options):
+    """``sample``, or ``margin`` with a policy that can run it (``margin_problem``)."""
+
+    def __init__(self) -> None:
+        super().__init__("sample", "margin")
+
+    def admits(self, value: Any, context: Mapping[str, Any]) -> bool:
+        return value == "sample" or margin_problem(policy_at(context.get("policy"))) is None
+
+    def depends_on(self) -> tuple[str, ...]:
+        return ("policy",)
+
+    def describe(self, context: Mapping[str, Any]) -> str:
+        problem = (margin_problem(policy_at(context.get("policy")))
+                   if context.get("decode") == "margin" else None)
+        plain = super().describe(context)
+        return (plain if problem is None else f"{plain}; not 'margin' with this policy: "
+                f"{problem}; decode=sample runs its actor")
 
 
 class PolicySelection:
@@ -124,26 +232,57 @@ class PolicySelection:
         return action_choice(view, int(rng.choice(len(p), p=p)), self.features)
 
 
+def margin_choice(values: np.ndarray, valid: np.ndarray, teacher: int, margin: float) -> int:
+    """The valid action of highest value if it beats the teacher's (a valid action) by more
+    than ``margin``, else the teacher's."""
+    best = int(np.argmax(np.where(valid, values, -np.inf)))
+    return best if values[best] - values[teacher] > margin else teacher
+
+
+class MarginSelection:
+    """Selection rule: HOCF's choice unless ``values`` (a batch of feature-set-3 states ->
+    one value per action, in J) rates another valid action more than ``margin`` above it."""
+
+    def __init__(self, values: Callable[[Mapping[str, Tensor]], Tensor], margin: float) -> None:
+        self.values, self.margin = values, margin
+
+    def select(self, view: DecisionView, rng: np.random.Generator) -> int:
+        del rng  # deterministic given the state: the engine's generator orders the AAVs
+        state = observe(view, MARGIN_FEATURES)
+        with torch.inference_mode():
+            values = self.values(collate([state]))[0].double().numpy()
+        action = margin_choice(values, state.action_mask, teacher_action(state), self.margin)
+        return action_choice(view, action, MARGIN_FEATURES)
+
+
 class TSACOCFAllocator(OCFAllocator):
-    """Settings: ``policy`` (a policy file; default the shipped one), ``temperature`` and
-    the engine's ``k_max``, ``c_max``, ``init``."""
+    """Settings: ``policy`` (a policy file; default the shipped one), ``decode`` (``margin``:
+    HOCF's choice unless the policy's critics back another by ``margin`` J; ``sample``: from
+    the actor at ``temperature``), and the engine's ``k_max``, ``c_max``, ``init``,
+    ``samples``."""
 
     name = "tsac-ocf"
     setting_constraints = declare(**OCFAllocator.setting_constraints,
-                                  policy=NoneOr(ExistingFile()),
-                                  temperature=Interval(float, 0, None))
+                                  policy=NoneOr(PolicyFile()),
+                                  decode=Decoding(),
+                                  temperature=Interval(float, 0, None),
+                                  margin=Interval(float, 0, None))
 
-    def __init__(self, policy: str | None = None, temperature: float = 1.0,
-                 k_max: int = K_MAX, c_max: int = C_MAX, init: str = INIT,
-                 samples: int = SAMPLES) -> None:
+    def __init__(self, policy: str | None = None, decode: str = "margin",
+                 temperature: float = 1.0, margin: float = MARGIN, k_max: int = K_MAX,
+                 c_max: int = C_MAX, init: str = INIT, samples: int = SAMPLES) -> None:
         super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples)
         self.policy = policy
+        self.decode = decode
         self.temperature = temperature
+        self.margin = margin
 
     def rule(self, state: PlanningState) -> SelectionRule:
         del state
-        actor = _cached_policy(str(Path(self.policy) if self.policy else DEFAULT_POLICY))
-        return PolicySelection(actor, self.temperature)
+        policy = policy_at(self.policy)
+        if self.decode == "margin":
+            return MarginSelection(policy.values, self.margin)
+        return PolicySelection(policy.actor, self.temperature)
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:

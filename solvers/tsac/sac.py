@@ -23,7 +23,8 @@ and the training run behind ``tsac-bench train``.
   least mean final J, the completion's own choice always among the labelled actions.
 
 Files written to the output folder: ``checkpoint.pt`` (everything needed to resume),
-``policy.pt`` (the actor alone, the form ``tsac-ocf`` loads), ``curve.json`` and
+``policy.pt`` (the form ``tsac-ocf`` loads: the actor, and with rollout labels the critics
+that ``decode=margin`` uses; ``policy-STEP.pt`` at each gauge point), ``curve.json`` and
 ``curve.png`` (the training curve).
 """
 
@@ -762,10 +763,17 @@ class _Run:
         self.log["evals"].append({"step": self.step, "seconds":
                                   time.perf_counter() - self.began,
                                   **self.evaluate(self.sac.actor)})
-        save_policy(self.sac.actor, self.out / f"policy-{self.step}.pt",
-                    {"steps": self.step, "seed": self.config.seed,
-                     "config": self.config.to_dict(), **self.log["evals"][-1]})
+        self.save_policy(self.out / f"policy-{self.step}.pt",
+                         {"steps": self.step, "seed": self.config.seed,
+                          "config": self.config.to_dict(), **self.log["evals"][-1]})
         return {**stats, **self.log["evals"][-1]}
+
+    def save_policy(self, path: Path, meta: dict[str, Any]) -> None:
+        """The actor, with the critics where their values are final-J differences (rollout
+        labels, ``label_scale`` J per unit): what decoding by margin needs."""
+        rollout = self.config.signal == "rollout"
+        save_policy(self.sac.actor, path, meta, critics=self.sac.critics if rollout else (),
+                    critic_unit=self.config.label_scale)
 
 
 def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path | None = None,
@@ -798,7 +806,7 @@ def train(out: Path, config: TrainConfig, *, device: str = "auto", resume: Path 
     meta = {"steps": run.step, "episode_count": run.episode, "seed": config.seed,
             "seconds": seconds, "device": str(torch_device), "torch": torch.__version__,
             "threads": torch.get_num_threads(), "config": config.to_dict()}
-    save_policy(run.sac.actor, out / "policy.pt", meta)
+    run.save_policy(out / "policy.pt", meta)
     summary = {**meta, **run.log}
     (out / "curve.json").write_text(json.dumps(summary, indent=1))
     plot_curve(summary, out / "curve.png")

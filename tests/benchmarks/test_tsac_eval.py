@@ -49,3 +49,16 @@ def test_the_noise_control_is_hocf_at_share_0_and_deviates_in_its_share_of_decis
     assert 2000 * 0.25 - 60 < deviations < 2000 * 0.25 + 60  # 3 standard deviations
     # A deviation draws uniformly, HOCF's own choice included.
     assert abs(chosen.count(5) - deviations / 3) < 45 and set(chosen) == {3, 5, 8}
+
+
+def test_ablation_and_temperature_rows_sample_an_actor_and_row_specs_run_as_given():
+    rows = tsac_eval.variants(None, ["old=old.pt"], incumbent=False, temperatures=True,
+                              baselines=("hocf",), specs=("margin 1=tsac-ocf:margin=1",))
+    assert rows == [
+        ("hocf", "hocf", {}),
+        ("tsac-ocf", "tsac-ocf", {}),
+        ("tsac-ocf T=0.5", "tsac-ocf", {"decode": "sample", "temperature": 0.5}),
+        ("tsac-ocf T=0 (argmax)", "tsac-ocf", {"decode": "sample", "temperature": 0.0}),
+        ("old", "tsac-ocf", {"policy": "old.pt", "decode": "sample"}),
+        ("margin 1", "tsac-ocf:margin=1", {}),
+    ]

@@ -12,7 +12,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import tsac_learnability as tl
 
 pytest.importorskip("torch")
-from tsac_bench.solvers.tsac.env import FEATURE_SETS, Observation
+from tsac_bench.solvers.tsac.env import FEATURE_SETS, Observation, teacher_action
 from tsac_bench.solvers.tsac.sac import Labelled
 
 WIDTH = FEATURE_SETS[3].task_dim
@@ -33,7 +33,7 @@ def test_advantages_are_the_labels_less_hocfs_whose_choice_is_the_teacher_column
     assert example.actions == (0, 3)
     assert example.gains == pytest.approx([0.3, -0.5])
     # No row set: HOCF passes (action 0); not labelled: no example.
-    assert tl.teacher_action(observation(np.zeros((3, WIDTH)))) == 0
+    assert teacher_action(observation(np.zeros((3, WIDTH)))) == 0
     assert tl.Advantages.of(Labelled(observation(tasks), (0, 1), (0.1, -0.1))) is None
 
 
@@ -114,14 +114,6 @@ def test_the_repeated_labels_leave_hocfs_game_as_it_is() -> None:
     assert game.cost == plain.cost
     assert len(rule.pairs) > 0
     assert all(len(first) == len(second) <= 3 for first, second in rule.pairs)
-
-
-def test_margin_choice_deviates_only_beyond_tau_and_never_to_an_invalid_action() -> None:
-    values = np.array([1.0, 0.25, 0.5, 5.0])
-    valid = np.array([True, True, True, False])
-    assert tl.margin_choice(values, valid, teacher=1, tau=0.5) == 0  # 0.75 above the teacher
-    assert tl.margin_choice(values, valid, teacher=1, tau=1.0) == 1
-    assert tl.margin_choice(values, valid, teacher=0, tau=-1.0) == 0
 
 
 @pytest.mark.parametrize("tau", [float("inf"), -1.0])

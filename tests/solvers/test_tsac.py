@@ -39,12 +39,16 @@ from tsac_bench.solvers.tsac.env import (  # noqa: E402
     replan_moments,
     unpad,
 )
-from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, collate  # noqa: E402
+from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate  # noqa: E402
 from tsac_bench.solvers.tsac.policy import (  # noqa: E402
     DEFAULT_POLICY,
+    MARGIN_FEATURES,
     PolicyFileError,
     PolicySelection,
+    TSACOCFAllocator,
     load_policy,
+    margin_choice,
+    read_policy,
     save_policy,
 )
 from tsac_bench.solvers.tsac.sac import (  # noqa: E402
@@ -66,6 +70,8 @@ from tsac_bench.solvers.tsac.sac import (  # noqa: E402
 
 SMALL = NetConfig(AGENT_DIM, TASK_DIM, DEPOT_DIM, d_model=16, heads=2, layers=2,
                   feedforward=32)
+#: The policy shipped before the present one (feature set 1, the actor alone).
+POLICY_1 = DEFAULT_POLICY.parent / "tsac-policy-1.pt"
 
 
 def random_state(rng: np.random.Generator, n_tasks: int, n_depots: int,
@@ -238,11 +244,13 @@ def test_zero_temperature_takes_the_most_probable_task():
     game = CoalitionGame(state, state.base_routes())
     n = next(n for n in range(game.n_aavs) if game.candidates(n))
     view = DecisionView(game, n, game.candidates(n))
-    actor = load_policy()
-    sampled = PolicySelection(actor, temperature=1.0).probabilities(view)
-    greedy = PolicySelection(actor, temperature=0.0).probabilities(view)
-    assert greedy.sum() == 1.0 and greedy[int(np.argmax(sampled))] == 1.0
-    assert set(np.flatnonzero(sampled)) <= {game.visible.index(m) for m in view.candidates}
+    for actor in (load_policy(), load_policy(POLICY_1)):
+        features = FEATURE_SETS[actor.config.features]
+        sampled = PolicySelection(actor, temperature=1.0).probabilities(view)
+        greedy = PolicySelection(actor, temperature=0.0).probabilities(view)
+        assert greedy.sum() == 1.0 and greedy[int(np.argmax(sampled))] == 1.0
+        tasks = {features.offset + game.visible.index(m) for m in view.candidates}
+        assert set(np.flatnonzero(sampled)) <= tasks | ({0} if features.pass_action else set())
 
 
 def test_every_ocf_method_starts_alike_by_default():
@@ -411,7 +419,8 @@ def test_rollout_workers_give_the_same_labels_to_the_last_digit():
 
 
 def test_policy_files_name_their_feature_set(tmp_path):
-    assert load_policy().config.features == 1  # the shipped file predates feature set 2
+    assert load_policy(POLICY_1).config.features == 1  # it predates feature set 2
+    assert load_policy().config.features == 3
     torch.manual_seed(1)
     actor = PolicyNet(SMALL_V2)
     save_policy(actor, tmp_path / "v2.pt", {})
@@ -429,7 +438,7 @@ def test_policy_files_name_their_feature_set(tmp_path):
         load_policy(tmp_path / "future.pt")
     # Same seed, same plan, with the pass in play and best of 2 games.
     instance = generate("8/20", 4)
-    settings = {"policy": str(tmp_path / "v2.pt"), "samples": 2}
+    settings = {"policy": str(tmp_path / "v2.pt"), "decode": "sample", "samples": 2}
     runs = [solve(instance, "tsac-ocf", seed=9, mode="dynamic", settings=settings)
             for _ in range(2)]
     assert runs[0].solution.routes == runs[1].solution.routes
@@ -620,3 +629,81 @@ def test_the_look_ahead_takes_the_action_of_least_rollout_J():
                             seed=int(rng.integers(2**31)))[:, 0]
     chosen = [action_choice(view, int(a), V2) for a in valid].index(choice)
     assert finals[chosen] == finals.min() and np.ptp(finals) > 0
+
+
+SMALL_V3 = NetConfig(AGENT_DIM, MARGIN_FEATURES.task_dim, DEPOT_DIM, d_model=16, heads=2,
+                     layers=2, feedforward=32, features=3, pass_action=True)
+
+
+def margin_policy(path, critics: int = 2, unit: float = 1.0):
+    torch.manual_seed(3)
+    save_policy(PolicyNet(SMALL_V3), path, {},
+                critics=[QNet(SMALL_V3) for _ in range(critics)], critic_unit=unit)
+    return path
+
+
+def test_margin_choice_deviates_only_beyond_the_margin_and_never_to_an_invalid_action():
+    values = np.array([1.0, 0.25, 0.5, 5.0])
+    valid = np.array([True, True, True, False])
+    assert margin_choice(values, valid, teacher=1, margin=0.5) == 0  # 0.75 above the teacher
+    assert margin_choice(values, valid, teacher=1, margin=1.0) == 1
+    assert margin_choice(values, valid, teacher=0, margin=-1.0) == 0
+
+
+def test_policy_files_carry_the_critics_in_j(tmp_path):
+    policy = read_policy(margin_policy(tmp_path / "p.pt", unit=2.5))
+    assert len(policy.critics) == 2 and policy.critic_unit == 2.5
+    assert all(not p.requires_grad for q in policy.critics for p in q.parameters())
+    state = PlanningState.static(generate("4/10", 8))
+    game = CoalitionGame(state, state.base_routes())
+    n = next(n for n in range(game.n_aavs) if game.candidates(n))
+    obs = collate([observe(DecisionView(game, n, game.candidates(n)), MARGIN_FEATURES)])
+    first, second = (q(obs) for q in policy.critics)
+    assert torch.equal(policy.values(obs), 2.5 * torch.minimum(first, second))
+    # A version 1 file (the actor alone) still loads, without critics.
+    assert read_policy(POLICY_1).critics == ()
+    assert len(read_policy(DEFAULT_POLICY).critics) == 2
+
+
+def test_margin_decoding_plays_hocfs_game_when_no_deviation_clears_the_margin(tmp_path):
+    """With a margin no critic difference reaches, every decision is HOCF's: the same J;
+    with margin 0 the critics (random here) play another game, the same one per seed."""
+    path = str(margin_policy(tmp_path / "p.pt"))
+    instance = generate("8/20", 5)
+    hocf = solve(instance, "hocf", seed=2, mode="dynamic")
+    kept = solve(instance, TSACOCFAllocator(path, decode="margin", margin=1e9), seed=2,
+                 mode="dynamic")
+    assert kept.cost == hocf.cost and kept.solution.routes == hocf.solution.routes
+    runs = [solve(instance, "tsac-ocf", seed=2, mode="dynamic",
+                  settings={"policy": path, "decode": "margin", "margin": 0})
+            for _ in range(2)]
+    assert runs[0].solution.routes == runs[1].solution.routes
+    assert runs[0].cost != hocf.cost
+    assert runs[0].evaluation.feasible and runs[0].claim_matches
+
+
+def test_a_policy_the_decoding_cannot_run_is_a_bad_setting(tmp_path, data_dir):
+    from tsac_bench.cli import app
+    from tsac_bench.errors import InvalidSetting
+
+    without = margin_policy(tmp_path / "no-critics.pt", critics=0)
+    with pytest.raises(InvalidSetting, match=r"setting 'decode'.*no twin critics"):
+        make_allocator("tsac-ocf", policy=str(without), decode="margin")
+    v2 = tmp_path / "v2.pt"
+    save_policy(PolicyNet(SMALL_V2), v2, {}, critics=[QNet(SMALL_V2), QNet(SMALL_V2)])
+    with pytest.raises(InvalidSetting, match="needs HOCF's choice in the state"):
+        make_allocator("tsac-ocf", policy=str(v2), decode="margin")
+    with pytest.raises(InvalidSetting, match=r"got 'margin' \(its default\).*decode=sample"):
+        make_allocator("tsac-ocf", policy=str(without))
+    assert make_allocator("tsac-ocf", policy=str(without), decode="sample").decode == "sample"
+    # Not a torch file at all (torch raised a KeyError from its unpickler): one line.
+    junk = tmp_path / "junk.pt"
+    junk.write_text("junk")
+    with pytest.raises(InvalidSetting, match=rf"setting 'policy'.*{junk}: cannot read"):
+        make_allocator("tsac-ocf", policy=str(junk))
+    from typer.testing import CliRunner
+
+    result = CliRunner().invoke(app, ["solve", str(data_dir / "hand.json"), "--method",
+                                      f"tsac-ocf:policy={junk}"])
+    assert result.exit_code == 2
+    assert result.stderr.count("\n") == 1 and "cannot read the policy" in result.stderr

@@ -37,6 +37,7 @@ from tsac_bench.planning.settings import (
     MethodSpec,
     NoneOr,
     Options,
+    Refused,
     declare,
     parse_method_spec,
 )
@@ -57,6 +58,7 @@ __all__ = [
     "Options",
     "PlanResult",
     "PlanningState",
+    "Refused",
     "Settings",
     "allocator_class",
     "available_methods",

@@ -42,6 +42,7 @@ __all__ = [
     "MethodSpec",
     "NoneOr",
     "Options",
+    "Refused",
     "check_settings",
     "declare",
     "file_label",
@@ -54,7 +55,8 @@ _NONE_WORDS = ("none", "null")
 
 
 class Refused(Exception):
-    """A value a constraint does not admit (the caller words the error)."""
+    """A value a constraint does not admit (the caller words the error; a message, if any,
+    says why, e.g. what was wrong inside a file)."""
 
 
 class Constraint(ABC):
@@ -218,22 +220,25 @@ def check_settings(method: str, cls: Callable[..., Any],
                              f"{', '.join(names) or 'none'}")
     constraints: Mapping[str, Constraint] = getattr(cls, "setting_constraints", {})
 
-    def refuse(name: str, value: Any, context: Mapping[str, Any]) -> InvalidSetting:
+    def refuse(name: str, value: Any, context: Mapping[str, Any],
+               why: str = "") -> InvalidSetting:
         default = "" if name in settings else " (its default)"
+        why = f" ({why})" if why else ""
         return InvalidSetting(f"method {method!r} setting {name!r}: got {value!r}{default}; "
-                              f"allowed: {constraints[name].describe(context)}")
+                              f"allowed: {constraints[name].describe(context)}{why}")
 
     converted, refused = dict(settings), []
     for name, value in settings.items():
         if name in constraints:
             try:
                 converted[name] = constraints[name].convert(value)
-            except Refused:
-                refused.append(name)
+            except Refused as exc:
+                refused.append((name, str(exc)))
     # The range described with the other given settings (elite's with the given population).
     context = {**defaults, **converted}
     if refused:
-        raise refuse(refused[0], settings[refused[0]], context)
+        name, why = refused[0]
+        raise refuse(name, settings[name], context, why)
     # A given setting, and a default whose range depends on a given one (elite < population).
     for name, constraint in constraints.items():
         checked = name in settings or set(constraint.depends_on()) & set(settings)

@@ -281,6 +281,10 @@ class TSACOCFAllocator(OCFAllocator):
         del state
         policy = policy_at(self.policy)
         if self.decode == "margin":
+            # Reached unchecked only by a caller that built the allocator without make_allocator.
+            problem = margin_problem(policy)
+            if problem is not None:
+                raise PolicyFileError(f"{self.policy or DEFAULT_POLICY}: decode=margin: {problem}")
             return MarginSelection(policy.values, self.margin)
         return PolicySelection(policy.actor, self.temperature)
 

@@ -696,6 +696,8 @@ def test_a_policy_the_decoding_cannot_run_is_a_bad_setting(tmp_path, data_dir):
     with pytest.raises(InvalidSetting, match=r"got 'margin' \(its default\).*decode=sample"):
         make_allocator("tsac-ocf", policy=str(without))
     assert make_allocator("tsac-ocf", policy=str(without), decode="sample").decode == "sample"
+    with pytest.raises(PolicyFileError, match="decode=margin: its file carries no twin critics"):
+        TSACOCFAllocator(str(without)).rule(PlanningState.static(generate("4/10", 1)))
     # Not a torch file at all (torch raised a KeyError from its unpickler): one line.
     junk = tmp_path / "junk.pt"
     junk.write_text("junk")

@@ -283,3 +283,30 @@ def test_jobs_of_a_spec_take_the_modes_and_time_limits_of_its_method(two_instanc
     for job in jobs:  # the worker builds the method from its name and converted settings
         assert (job.spec["method"], job.spec["settings"]) in (("exact-cpsat", {"threads": 2}),
                                                              ("hocf", {"k_max": 3}))
+
+
+def test_resuming_jobs_recorded_with_other_settings_says_so_and_keeps_them(tmp_path,
+                                                                            two_instances):
+    out = tmp_path / "run"
+    config = RunConfig([two_instances], out, methods=["hocf", "greedy"], mode="static", jobs=1)
+    notes: list[str] = []
+    run_batch(config, note=notes.append, progress=False)
+    again = run_batch(config, note=notes.append, progress=False)
+    assert again.ran == 0 and not any("other settings" in line for line in notes)
+    # A store from before a default changed: one hocf job recorded another c_max and a
+    # setting hocf no longer has.
+    with sqlite3.connect(out / "results.sqlite") as db:
+        key, settings = db.execute("SELECT key, settings FROM jobs WHERE method = 'hocf' "
+                                   "ORDER BY key LIMIT 1").fetchone()
+        older = {**json.loads(settings), "c_max": 10, "retired": True}
+        db.execute("UPDATE jobs SET settings = ? WHERE key = ?", (json.dumps(older), key))
+        before = db.execute("SELECT J, finished_at FROM jobs WHERE key = ?", (key,)).fetchone()
+    notes.clear()
+    resumed = run_batch(config, note=notes.append, progress=False)
+    assert resumed.ran == 0
+    assert notes[-1] == ("1 recorded hocf job(s) ran with other settings than hocf takes now "
+                         "(c_max, retired); they are kept: delete them from the store to run "
+                         "them again")
+    with sqlite3.connect(out / "results.sqlite") as db:
+        assert db.execute("SELECT J, finished_at FROM jobs WHERE key = ?",
+                          (key,)).fetchone() == before

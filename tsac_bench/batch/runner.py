@@ -5,7 +5,9 @@ recorded in the run directory's results store.
 Restarting the same command on the same ``--out`` skips the jobs already recorded, so a run
 killed at any moment loses nothing and ends as an uninterrupted one would. Failed jobs (an
 allocator that raises, crashes its process or overruns its time limit) are recorded with their
-status and message and count as finished; ``--retry-failed`` runs them again.
+status and message and count as finished; ``--retry-failed`` runs them again. A recorded job
+whose method takes other settings today than it ran with is kept and named in a note
+(``changed_settings``).
 """
 
 from __future__ import annotations
@@ -37,9 +39,11 @@ from tsac_bench.planning import (
     allocator_class,
     available_methods,
     is_exact_method,
+    make_allocator,
     resolve_spec,
     supported_modes,
 )
+from tsac_bench.planning.solve import recorded_settings
 
 #: Default solver time limit, in seconds per 10 tasks (never below one unit), of one plan
 #: call: a static job plans once, a dynamic one once plus once per release event. Sized so
@@ -288,6 +292,9 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
         if outcome.skipped:
             note(f"resuming {config.out}: {outcome.skipped} of {len(jobs)} jobs already "
                  "recorded")
+            skipped = {job.spec["key"] for job in jobs} - {job.spec["key"] for job in todo}
+            for line in changed_settings(store.rows(), methods, skipped):
+                note(line)
         by_key = {job.spec["key"]: job for job in todo}
         with _progress_bar(len(todo), enabled=progress) as advance:
             for spec, result in execute(config, [job.spec for job in todo]):
@@ -298,6 +305,36 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
                     note(f"{spec['key']}: {status}: {result['message'] or status}")
                 advance(status != OK)
     return outcome
+
+
+_ABSENT = object()
+
+
+def changed_settings(rows: Iterable[dict[str, Any]], methods: Sequence[MethodSpec],
+                     keys: set[str]) -> list[str]:
+    """One note per method whose recorded ok jobs among ``keys`` ran with other settings than
+    the method takes today (a default changed since, e.g. a new shipped policy): resuming
+    keeps those results, so the store would mix two versions of the method unnoticed."""
+    today = {}
+    for method in methods:
+        try:
+            today[method.label] = recorded_settings(make_allocator(method))
+        except Exception:  # a method that cannot be built fails in its own jobs, not here
+            continue
+    changed: dict[str, tuple[int, set[str]]] = {}
+    for row in rows:
+        recorded, now = row["settings"], today.get(row["method"])
+        # Stores from before settings were recorded say nothing either way.
+        if row["key"] not in keys or row["status"] != OK or not recorded or now is None:
+            continue
+        names = {name for name in recorded.keys() | now.keys()
+                 if recorded.get(name, _ABSENT) != now.get(name, _ABSENT)}
+        if names:
+            count, seen = changed.get(row["method"], (0, set()))
+            changed[row["method"]] = (count + 1, seen | names)
+    return [f"{count} recorded {label} job(s) ran with other settings than {label} takes now "
+            f"({', '.join(sorted(names))}); they are kept: delete them from the store to run "
+            "them again" for label, (count, names) in changed.items()]
 
 
 @contextmanager

@@ -16,7 +16,7 @@ from tsac_bench.planning.registry import make_allocator
 from tsac_bench.planning.settings import MethodSpec
 from tsac_bench.planning.simulator import InvalidPlan, checked_plan, simulate
 
-__all__ = ["InvalidPlan", "SolveOutcome", "solve"]
+__all__ = ["InvalidPlan", "SolveOutcome", "recorded_settings", "solve"]
 
 
 @dataclass(frozen=True)
@@ -72,11 +72,15 @@ def solve(instance: Instance, method: str | MethodSpec | Allocator, *, seed: int
         # Only the last plan is the executed one; earlier claims priced other plans.
         claimed = run.replans[-1].claimed_cost
     meta = {"method": allocator.name, "mode": mode, "seed": seed,
-            "settings": _jsonable(allocator.settings()) if hasattr(allocator, "settings") else {}}
+            "settings": recorded_settings(allocator)}
     solution = Solution(instance.name, routes, evaluation.J, meta)
     return SolveOutcome(solution, evaluation, wall, stats, claimed)
 
 
-def _jsonable(settings: Mapping[str, Any]) -> dict[str, Any]:
+def recorded_settings(allocator: Allocator) -> dict[str, Any]:
+    """The settings a run records for ``allocator``: every constructor keyword, a value JSON
+    cannot hold as its ``repr``."""
+    if not hasattr(allocator, "settings"):
+        return {}
     return {k: v if isinstance(v, str | int | float | bool | None) else repr(v)
-            for k, v in settings.items()}
+            for k, v in allocator.settings().items()}

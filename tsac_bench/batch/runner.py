@@ -292,7 +292,7 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
         if outcome.skipped:
             note(f"resuming {config.out}: {outcome.skipped} of {len(jobs)} jobs already "
                  "recorded")
-            skipped = {job.spec["key"] for job in jobs} - {job.spec["key"] for job in todo}
+            skipped = {job.spec["key"] for job in jobs if job.spec["key"] in done}
             for line in changed_settings(store.rows(), methods, skipped):
                 note(line)
         by_key = {job.spec["key"]: job for job in todo}

@@ -30,9 +30,12 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
   HOCF's choice to the action of highest value where that value exceeds HOCF's choice's by
   more than ``tau`` J; the value is the minimum of the run's twin critics (``critic``) or the
   actor's logits less the teacher prior's log-probabilities times the run's
-  ``teacher_prior`` weight (``actor``: the critic the KL-regularised actor implies). Paired
-  against HOCF's J per instance. ``--first-seed`` plays generated instances instead, apart
-  from the evaluation's, to choose tau on.
+  ``teacher_prior`` weight (``actor``: the critic the KL-regularised actor implies); two
+  variants of ``critic``: ``agree`` deviates only where each twin alone rates the action
+  more than tau above HOCF's choice, ``veto`` lets the critic choose only between HOCF's
+  choice and passing (HOCF proposes, the critic may refuse). Paired against HOCF's J per
+  instance, with the J each row spends on unmet demand. ``--first-seed`` plays generated
+  instances instead, apart from the evaluation's, to choose tau on.
 
       python benchmarks/tsac_learnability.py margin results/teacher-kl-0.3-r16-long --scale 32/80
 
@@ -67,6 +70,7 @@ from tsac_bench.solvers.ocf.hocf import HOCFAllocator
 if TYPE_CHECKING:  # torch is loaded where it is used
     import torch
 
+    from tsac_bench.planning.solve import SolveOutcome
     from tsac_bench.solvers.tsac.env import Observation
     from tsac_bench.solvers.tsac.sac import Labelled, RolloutWorkers
 
@@ -328,7 +332,9 @@ def run_held_out(args: argparse.Namespace) -> list[str]:
 
 
 def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]], torch.Tensor]]:
-    """The two value functions of a training run's checkpoint (see ``margin``)."""
+    """The value functions of a training run's checkpoint (see ``margin``)."""
+    import torch
+
     from tsac_bench.solvers.tsac.policy import Policy
     from tsac_bench.solvers.tsac.sac import DiscreteSAC, TrainConfig, teacher_prior_of
 
@@ -338,8 +344,25 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
     for network in (sac.actor, *sac.critics):
         network.eval()
     policy = Policy(sac.actor, tuple(sac.critics), config.label_scale)
+
+    def teacher_column(obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        # teacher_prior_of puts all but the spread's mass on HOCF's choice
+        return teacher_prior_of(obs).argmax(dim=-1, keepdim=True)
+
+    def agree(obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        gains = [critic(obs) - critic(obs).gather(1, teacher_column(obs))
+                 for critic in sac.critics]
+        return torch.minimum(*gains) * config.label_scale
+
+    def veto(obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        values = policy.values(obs)
+        kept = torch.zeros_like(obs["action_mask"]).scatter_(1, teacher_column(obs), True)
+        kept[:, 0] |= obs["action_mask"][:, 0]  # the pass action
+        return torch.where(kept, values, torch.full_like(values, -torch.inf))
+
     return {"critic": policy.values,
-            "actor": lambda obs: sac.teacher_prior * (sac.actor(obs) - teacher_prior_of(obs))}
+            "actor": lambda obs: sac.teacher_prior * (sac.actor(obs) - teacher_prior_of(obs)),
+            "agree": agree, "veto": veto}
 
 
 class MarginAllocator(HOCFAllocator):
@@ -355,6 +378,11 @@ class MarginAllocator(HOCFAllocator):
 
         del state
         return MarginSelection(self.score, self.tau)
+
+
+def unmet_load(outcomes: Sequence[SolveOutcome]) -> float:
+    """Mean J spent on unmet demand (the evaluator's weighted C_load term)."""
+    return float(np.mean([outcome.evaluation.terms["load"] for outcome in outcomes]))
 
 
 def run_margin(args: argparse.Namespace) -> list[str]:
@@ -377,31 +405,34 @@ def run_margin(args: argparse.Namespace) -> list[str]:
         seeds = range(args.first_seed, args.first_seed + args.instances)
         instances = [generate(args.scale, seed) for seed in seeds]
         source = f"generated instances of seeds {seeds.start}..{seeds.stop - 1}"
-    hocf = [solve(i, "hocf", seed=0, mode="dynamic").cost for i in instances]
+    hocf_outcomes = [solve(i, "hocf", seed=0, mode="dynamic") for i in instances]
+    hocf = [outcome.cost for outcome in hocf_outcomes]
     footing = make_allocator("hocf").settings()
     lines = [f"Dynamic mode, {source} at {args.scale}, method seed 0; every row is HOCF's "
              f"game with its start ({footing['init']}), games per plan call "
              f"({footing['samples']}) and budget (k_max {footing['k_max']}, c_max "
-             f"{footing['c_max']}, no time limit); HOCF's mean J {np.mean(hocf):.2f}. d = "
-             "J(row) - J(HOCF) per instance (negative: cheaper).",
+             f"{footing['c_max']}, no time limit); HOCF's mean J {np.mean(hocf):.2f}, of which "
+             f"{unmet_load(hocf_outcomes):.2f} unmet load (the w1 C_load term). d = J(row) - "
+             "J(HOCF) per instance (negative: cheaper).",
              "",
              "| scale | value | tau | mean J | mean d, 95 % | mean d / mean J(HOCF) | "
-             "lower / higher | mean wall (s) |",
-             "|---|---|---:|---:|---:|---:|---:|---:|"]
+             "lower / higher | unmet load | mean wall (s) |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name in args.score:
         for tau in args.tau:
             allocator = MarginAllocator(scores[name], tau)
-            costs, walls = [], []
+            outcomes, walls = [], []
             for instance in instances:
                 began = time.perf_counter()
-                costs.append(solve(instance, allocator, seed=0, mode="dynamic").cost)
+                outcomes.append(solve(instance, allocator, seed=0, mode="dynamic"))
                 walls.append(time.perf_counter() - began)
+            costs = [outcome.cost for outcome in outcomes]
             d = np.subtract(costs, hocf)
             lines.append(f"| {args.scale} | {name} | {tau:g} | {np.mean(costs):.2f} | "
                          f"{d.mean():+.2f} +- {normal_half_width(d):.2f} | "
                          f"{100 * d.mean() / np.mean(hocf):+.1f} % | "
                          f"{int((d < 0).sum())} / {int((d > 0).sum())} | "
-                         f"{np.mean(walls):.2f} |")
+                         f"{unmet_load(outcomes):.2f} | {np.mean(walls):.2f} |")
             print(lines[-1], flush=True)
     return lines
 
@@ -428,7 +459,8 @@ def main() -> None:
     margin.add_argument("--first-seed", type=int, default=None,
                         help="generated instances from this seed instead of paper-mc's")
     margin.add_argument("--tau", type=float, action="append", default=None)
-    margin.add_argument("--score", choices=("critic", "actor"), action="append", default=None)
+    margin.add_argument("--score", choices=("critic", "actor", "agree", "veto"), action="append",
+                        default=None)
     args = parser.parse_args()
     if args.part == "margin":
         args.tau = args.tau or [0.5, 1.0]

@@ -142,3 +142,33 @@ def test_margin_selection_plays_hocfs_game_when_it_keeps_or_values_the_teachers_
     # Preferring anything but HOCF's choice plays another game.
     other = solve(instance, tl.MarginAllocator(contrary, -1.0), seed=0, mode="dynamic").cost
     assert other != hocf
+
+
+def test_agree_and_veto_are_the_critics_restricted_as_documented() -> None:
+    """On a freshly initialised run: ``veto`` keeps the critic's values of HOCF's choice
+    and the pass only; ``agree`` is each twin's gain over HOCF's choice, the smaller one,
+    in J (0 at HOCF's choice)."""
+    import torch
+
+    from tsac_bench.solvers.tsac.net import collate
+    from tsac_bench.solvers.tsac.sac import DiscreteSAC, TrainConfig
+
+    torch.manual_seed(0)
+    config = TrainConfig(features=3, teacher_prior=0.3, label_scale=2.0)
+    sac = DiscreteSAC(config.net, config.sac, "cpu", config.teacher_prior)
+    scores = tl.run_scores({"config": config.to_dict(), "sac": sac.state_dict()})
+    rng = np.random.default_rng(1)
+    tasks = rng.random((4, WIDTH))
+    tasks[:, -1] = 0.0
+    tasks[2, -1] = 1.0  # HOCF chooses task row 2: action 3
+    obs = collate([observation(tasks)])
+    with torch.inference_mode():
+        critic = scores["critic"](obs)[0].numpy()
+        veto = scores["veto"](obs)[0].numpy()
+        agree = scores["agree"](obs)[0].numpy()
+        twins = [q(obs)[0].numpy() for q in sac.critics]
+    assert veto[[0, 3]] == pytest.approx(critic[[0, 3]])
+    assert np.all(np.isneginf(veto[[1, 2, 4]]))
+    gains = np.minimum(*(2.0 * (q - q[3]) for q in twins))
+    assert agree[:5] == pytest.approx(gains, abs=1e-5)
+    assert agree[3] == 0.0

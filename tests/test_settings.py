@@ -18,11 +18,12 @@ from tsac_bench.planning import (
     NoneOr,
     Options,
     allocator_class,
+    declare,
     make_allocator,
     parse_method_spec,
     resolve_spec,
 )
-from tsac_bench.planning.settings import constructor_keywords, format_value
+from tsac_bench.planning.settings import constructor_keywords, format_value, settings_table
 from tsac_bench.testing import check_declared_settings
 
 runner = CliRunner()
@@ -229,3 +230,34 @@ def test_a_range_that_names_another_setting_is_described_with_its_given_value():
                                              r"in \[0, population=4\)"):
         make_allocator("dga", population=4, elite=4)
     assert make_allocator("dga:population=4:elite=3:migrants=3").settings()["elite"] == 3
+
+
+def test_a_methods_settings_table_gives_each_default_and_what_is_allowed() -> None:
+    class Method:
+        setting_constraints = declare(population=Interval(int, 1, None),
+                                      elite=Interval(int, 0, "population", closed="left"),
+                                      rule=NoneOr(Options("a", "b")))
+
+        def __init__(self, instance_path: str, *, population: int = 10, elite: int = 2,
+                     rule: str | None = None, tolerance: float = 1e-6) -> None:
+            pass
+
+    assert settings_table(Method) == [
+        ("instance_path", "(required)", ""),
+        ("population", "10", "an integer >= 1"),
+        ("elite", "2", "an integer in [0, population=10)"),
+        ("rule", "none", "none or one of 'a', 'b'"),
+        ("tolerance", "1e-06", ""),  # no declared constraint: the method checks it
+    ]
+
+
+def test_methods_name_lists_its_settings_and_an_unknown_name_is_one_line() -> None:
+    hocf = runner.invoke(app, ["methods", "hocf"])
+    assert hocf.exit_code == 0, hocf.output
+    row = next(line for line in hocf.output.splitlines() if "w_distance" in line)
+    assert "2.0" in row and "a number >= 0" in row
+    assert "no settings" in runner.invoke(app, ["methods", "greedy"]).output
+    unknown = runner.invoke(app, ["methods", "nope"])
+    assert unknown.exit_code == 2
+    [line] = unknown.output.strip().splitlines()
+    assert line.startswith("error: unknown method 'nope'; known methods: cnp, dga, exact")

@@ -223,15 +223,29 @@ def verify(
 
 @app.command()
 @user_errors
-def methods() -> None:
-    """List the registered methods (built-in and plug-ins)."""
+def methods(
+    name: Annotated[str | None, typer.Argument(metavar="[NAME]", help="a method: list its "
+                                               "settings, defaults and allowed values")] = None,
+) -> None:
+    """List the registered methods (built-in and plug-ins), or one method's settings."""
     from tsac_bench.planning import (
         MethodUnavailable,
         allocator_class,
         available_methods,
         method_source,
     )
+    from tsac_bench.planning.settings import settings_table
 
+    if name is not None:
+        rows = settings_table(allocator_class(name))  # unknown, unavailable: one line
+        if not rows:
+            console.print(f"{name} ({method_source(name)}) has no settings")
+            return
+        table = Table("setting", "default", "allowed", title=f"{name} ({method_source(name)})")
+        for row in rows:
+            table.add_row(*row)
+        console.print(table)
+        return
     table = Table("method", "source", "status")
     for name in available_methods():
         try:

@@ -247,6 +247,17 @@ def check_settings(method: str, cls: Callable[..., Any],
     return converted
 
 
+def settings_table(cls: Callable[..., Any]) -> list[tuple[str, str, str]]:
+    """A method's settings as (name, default, what is allowed) texts, in constructor order:
+    what ``tsac-bench methods NAME`` prints. A setting without a declared constraint is
+    checked by the method alone ("")."""
+    names, defaults, _ = constructor_keywords(cls)
+    constraints: Mapping[str, Constraint] = getattr(cls, "setting_constraints", {})
+    return [(name, format_value(defaults[name]) if name in defaults else "(required)",
+             constraints[name].describe(defaults) if name in constraints else "")
+            for name in names]
+
+
 # --- method specs ------------------------------------------------------------------------
 def format_value(value: Any) -> str:
     """A setting's value as text that converts back to it."""

@@ -350,8 +350,8 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
         return teacher_prior_of(obs).argmax(dim=-1, keepdim=True)
 
     def agree(obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        gains = [critic(obs) - critic(obs).gather(1, teacher_column(obs))
-                 for critic in sac.critics]
+        teacher = teacher_column(obs)
+        gains = [q - q.gather(1, teacher) for q in (critic(obs) for critic in sac.critics)]
         return torch.minimum(*gains) * config.label_scale
 
     def veto(obs: dict[str, torch.Tensor]) -> torch.Tensor:

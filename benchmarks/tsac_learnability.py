@@ -336,7 +336,12 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
     import torch
 
     from tsac_bench.solvers.tsac.policy import Policy
-    from tsac_bench.solvers.tsac.sac import DiscreteSAC, TrainConfig, teacher_prior_of
+    from tsac_bench.solvers.tsac.sac import (
+        DiscreteSAC,
+        TrainConfig,
+        teacher_choice,
+        teacher_prior_of,
+    )
 
     config = TrainConfig.from_dict(checkpoint["config"])
     sac = DiscreteSAC(config.net, config.sac, "cpu", config.teacher_prior)
@@ -346,8 +351,7 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
     policy = Policy(sac.actor, tuple(sac.critics), config.label_scale)
 
     def teacher_column(obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        # teacher_prior_of puts all but the spread's mass on HOCF's choice
-        return teacher_prior_of(obs).argmax(dim=-1, keepdim=True)
+        return teacher_choice(obs).argmax(dim=-1, keepdim=True)
 
     def agree(obs: dict[str, torch.Tensor]) -> torch.Tensor:
         teacher = teacher_column(obs)

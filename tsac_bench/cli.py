@@ -247,13 +247,13 @@ def methods(
         console.print(table)
         return
     table = Table("method", "source", "status")
-    for name in available_methods():
+    for method in available_methods():
         try:
-            allocator_class(name)
+            allocator_class(method)
             status = "available"
         except MethodUnavailable as exc:
             status = f"unavailable: {exc}"
-        table.add_row(name, method_source(name), status)
+        table.add_row(method, method_source(method), status)
     console.print(table)
 
 

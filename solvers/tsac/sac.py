@@ -326,14 +326,22 @@ class LabelledBatch:
 TEACHER_PRIOR_SPREAD = 0.05
 
 
-def teacher_prior_of(states: dict[str, Tensor]) -> Tensor:
-    """Log-probabilities of the teacher prior over each state's actions (-inf outside the
-    validity mask): ``1 - TEACHER_PRIOR_SPREAD`` on the task row whose teacher-choice column
-    (feature set 3) is set, the rest uniform over the valid actions."""
-    mask = states["action_mask"]
+def teacher_choice(states: dict[str, Tensor]) -> Tensor:
+    """HOCF's choice in each feature-set-3 state, one-hot over the actions: the task row
+    whose teacher-choice column is set; all zero where HOCF passes (action 0, so that argmax
+    gives the action index as ``env.teacher_action`` does for one state)."""
     choice = states["tasks"][..., TEACHER_CHOICE_COLUMN]
     if "pass_token" in states:
         choice = torch.cat([torch.zeros_like(choice[:, :1]), choice], dim=1)
+    return choice
+
+
+def teacher_prior_of(states: dict[str, Tensor]) -> Tensor:
+    """Log-probabilities of the teacher prior over each state's actions (-inf outside the
+    validity mask): ``1 - TEACHER_PRIOR_SPREAD`` on HOCF's choice (``teacher_choice``), the
+    rest uniform over the valid actions."""
+    mask = states["action_mask"]
+    choice = teacher_choice(states)
     valid = mask.float()
     uniform = valid / valid.sum(dim=-1, keepdim=True).clamp(min=1)
     prior = TEACHER_PRIOR_SPREAD * uniform + (1 - TEACHER_PRIOR_SPREAD) * choice * valid

@@ -408,7 +408,7 @@ def train(
         "--resume, which keeps the checkpoint's configuration")] = None,
 ) -> None:
     """Train the TSAC-OCF task-selection policy (discrete SAC, docs/tsac.md)."""
-    from tsac_bench.planning.settings import parse_setting_pairs
+    from tsac_bench.planning.settings import config_from_settings, parse_setting_pairs
 
     if device not in ("auto", "cpu", "cuda"):
         raise TsacBenchError(f"--device: expected auto, cpu or cuda, got {device!r}")
@@ -439,7 +439,7 @@ def train(
     if steps is None:
         steps = (torch.load(resume, map_location="cpu", weights_only=False)["config"]["steps"]
                  if resume is not None else TrainConfig().steps)
-    config = TrainConfig.from_settings(settings, "--set", steps=steps, seed=seed)
+    config = config_from_settings(TrainConfig, settings, "--set", steps=steps, seed=seed)
     columns = (TextColumn("[bold]train"), BarColumn(), MofNCompleteColumn(),
                TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[info]}"))
     with Progress(*columns, console=console) as progress:

@@ -53,7 +53,6 @@ from tsac_bench.planning.settings import (
     Interval,
     NoneOr,
     Options,
-    check_settings,
     declare,
 )
 from tsac_bench.solvers.ocf.engine import (
@@ -639,22 +638,6 @@ class TrainConfig:
         eval_instances=Interval(int, 1, None),
         checkpoint_every=Interval(int, 1, None),
     )
-
-    @classmethod
-    def from_settings(cls, settings: Mapping[str, Any], where: str, **given: Any
-                      ) -> TrainConfig:
-        """A configuration of ``given`` fields and ``settings`` (texts read by their declared
-        type, as a method's ``--set``); ``where`` names their source in the one-line
-        InvalidSetting raised for a field that cannot be set or a value it does not admit."""
-        settable = cls.setting_constraints
-        unknown = sorted(set(settings) - set(settable))
-        if unknown:
-            raise InvalidSetting(f"{where}: TrainConfig has no settable field {unknown[0]!r}; "
-                                 f"the settable ones: {', '.join(settable)}")
-        try:
-            return cls(**given, **check_settings("TrainConfig", cls, settings))
-        except InvalidSetting as exc:
-            raise InvalidSetting(f"{where}: {exc}") from None
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNALS:

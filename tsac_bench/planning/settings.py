@@ -318,3 +318,21 @@ def file_label(label: str) -> str:
     letter, digit, ``-``, ``_``, ``=`` or ``+`` as ``_`` (no ``.``: it would read as a file
     suffix); a built-in method's name stays as it is."""
     return re.sub(r"[^\w=+-]", "_", label.replace(":", "+"), flags=re.ASCII)
+
+
+def config_from_settings(cls: Callable[..., Any], settings: Mapping[str, Any], where: str,
+                         **given: Any) -> Any:
+    """A configuration dataclass ``cls`` of ``given`` fields and ``settings`` (texts read by
+    the types ``cls.setting_constraints`` declares, as a method's ``--set``); ``where``
+    names their source in the one-line InvalidSetting raised for a field that cannot be set
+    or a value it does not admit."""
+    settable: Mapping[str, Constraint] = getattr(cls, "setting_constraints", {})
+    name = getattr(cls, "__name__", str(cls))
+    unknown = sorted(set(settings) - set(settable))
+    if unknown:
+        raise InvalidSetting(f"{where}: {name} has no settable field {unknown[0]!r}; the "
+                             f"settable ones: {', '.join(settable)}")
+    try:
+        return cls(**given, **check_settings(name, cls, settings))
+    except InvalidSetting as exc:
+        raise InvalidSetting(f"{where}: {exc}") from None

@@ -457,5 +457,42 @@ def train(
                   f"{out / 'policy.pt'}")
 
 
+@app.command("train-verifier")
+@user_errors
+def train_verifier_command(
+    out: Annotated[Path, typer.Option(help="output folder: policy.pt (the policy with its "
+                                      "verifier), labels.pt, verifier.json")],
+    policy: Annotated[Path | None, typer.Option(
+        help="the policy file whose critics' deviations are verified; default the shipped "
+        "one")] = None,
+    workers: Annotated[int, typer.Option(min=1, help="processes that label the instances "
+                                         "(the same labels with any number)")] = 1,
+    labels: Annotated[Path | None, typer.Option(
+        help="the labels.pt of an earlier call (same policy and labelling settings): fit "
+        "only")] = None,
+    setting: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="FIELD=VALUE", help="a field of VerifierConfig, repeatable, e.g. "
+        "--set epochs=10")] = None,
+) -> None:
+    """Train the deviation verifier of tsac-ocf's margin rule (docs/tsac.md)."""
+    from tsac_bench.planning.settings import config_from_settings, parse_setting_pairs
+    from tsac_bench.solvers.tsac.policy import margin_problem, policy_at
+    from tsac_bench.solvers.tsac.verify import VerifierConfig, train_verifier
+
+    config = config_from_settings(VerifierConfig, parse_setting_pairs(setting or [], "--set"),
+                                  "--set")
+    if policy is not None and not policy.is_file():
+        raise TsacBenchError(f"--policy: {policy} is not a file")
+    # An unreadable policy file is a PolicyFileError: one line naming the file.
+    problem = margin_problem(policy_at(str(policy) if policy else None))
+    if problem is not None:
+        raise TsacBenchError(f"--policy: {policy or 'the shipped policy'}: {problem}")
+    if labels is not None and not labels.is_file():
+        raise TsacBenchError(f"--labels: {labels} is not a file")
+    summary = train_verifier(out, str(policy) if policy else None, config, workers, labels)
+    console.print(f"{summary['labels']} labels ({summary['seconds_labelling']:.0f} s), fitted "
+                  f"in {summary['seconds_fit']:.0f} s; policy: {out / 'policy.pt'}")
+
+
 def main() -> None:
     app()

@@ -10,7 +10,9 @@ task in one of two ways (``decode``):
   run's twin critics rates another valid action more than ``margin`` J above it. Why: the
   critics of a run trained on rollout labels rank actions well only near the states they
   were trained on; a deviation they back by a wide margin pays, a close call does not
-  (reports/tsac-learnability.md measures both).
+  (reports/tsac-learnability.md measures both). With ``verify`` (a number), the policy
+  file's verifier (``tsac_verify``) must also rate the deviation more than ``verify`` J
+  above HOCF's choice.
 
 Either way the engine's seeded generator drives the game, so a run is deterministic per seed.
 The default policy ships with the package (``solvers/tsac/policies/tsac-default.pt``, decoded
@@ -56,6 +58,7 @@ from tsac_bench.solvers.tsac.env import (
     DEPOT_DIM,
     FEATURE_SETS,
     FeatureSet,
+    Observation,
     action_choice,
     observe,
     teacher_action,
@@ -64,12 +67,15 @@ from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate
 
 DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
 #: Version 2 adds the run's twin critics (``critics``, possibly none) and the J one unit of
-#: their values stands for (``critic_unit``); version 1 files (the actor alone) still load.
-POLICY_FORMAT = "tsac-bench/policy@2"
-_READABLE_FORMATS = ("tsac-bench/policy@1", POLICY_FORMAT)
+#: their values stands for (``critic_unit``); version 3 the deviation verifier (``verifier``,
+#: possibly none). Files of versions 1 (the actor alone) and 2 still load.
+POLICY_FORMAT = "tsac-bench/policy@3"
+_READABLE_FORMATS = ("tsac-bench/policy@1", "tsac-bench/policy@2", POLICY_FORMAT)
 #: The margin of ``decode="margin"`` (J), chosen on generated instances apart from the
 #: evaluation's (seeds 900000..900049, reports/tsac-learnability.md).
 MARGIN = 0.75
+#: The verifier margin of ``decode="margin"`` (J; None: no verifier check).
+VERIFY: float | None = None
 #: The feature set the margin rule needs: HOCF's choice is a column of its state.
 MARGIN_FEATURES = FEATURE_SETS[3]
 
@@ -81,27 +87,44 @@ class PolicyFileError(TsacBenchError):
 @dataclass(frozen=True)
 class Policy:
     """A policy file's frozen networks, on the CPU: the actor and, from a run trained on
-    rollout labels, its twin critics, whose values times ``critic_unit`` are J."""
+    rollout labels, its twin critics, whose values times ``critic_unit`` are J, and
+    possibly a deviation verifier (``tsac_verify``) in the same unit."""
 
     actor: PolicyNet
     critics: tuple[QNet, ...] = ()
     critic_unit: float = 1.0
+    verifier: QNet | None = None
 
     def values(self, obs: Mapping[str, Tensor]) -> Tensor:
         """The pessimistic (minimum) twin-critic value of each action, in J."""
         return torch.minimum(*(critic(obs) for critic in self.critics)) * self.critic_unit
 
+    def verified(self, obs: Mapping[str, Tensor]) -> Tensor:
+        """The verifier's value of each action, in J."""
+        assert self.verifier is not None
+        return self.verifier(obs) * self.critic_unit
+
 
 def save_policy(actor: PolicyNet, path: Path, meta: dict[str, Any],
-                critics: Sequence[QNet] = (), critic_unit: float = 1.0) -> None:
+                critics: Sequence[QNet] = (), critic_unit: float = 1.0,
+                verifier: QNet | None = None) -> None:
     """Write what ``tsac-ocf`` loads: the actor, and the critics to decode by margin (only
-    critics whose values are final-J differences, ``critic_unit`` J each); no optimiser."""
+    critics whose values are final-J differences, ``critic_unit`` J each) and their
+    verifier, if any; no optimiser."""
     path.parent.mkdir(parents=True, exist_ok=True)
     # Plain JSON types only, so that the file loads with weights_only=True.
     meta = json.loads(json.dumps(meta, default=str))
-    torch.save({"format": POLICY_FORMAT, "config": actor.config.to_dict(),
-                "actor": actor.state_dict(), "critics": [q.state_dict() for q in critics],
-                "critic_unit": float(critic_unit), "meta": meta}, path)
+    payload = {"format": POLICY_FORMAT, "config": actor.config.to_dict(),
+               "actor": actor.state_dict(), "critics": [q.state_dict() for q in critics],
+               "critic_unit": float(critic_unit), "meta": meta}
+    if verifier is not None:
+        payload["verifier"] = verifier.state_dict()
+    torch.save(payload, path)
+
+
+def policy_meta(path: Path | str = DEFAULT_POLICY) -> dict[str, Any]:
+    """What a policy file says of how it was made (its ``meta``)."""
+    return torch.load(path, map_location="cpu", weights_only=True).get("meta", {})
 
 
 def read_policy(path: Path | str = DEFAULT_POLICY) -> Policy:
@@ -132,7 +155,9 @@ def read_policy(path: Path | str = DEFAULT_POLICY) -> Policy:
     actor = _frozen(PolicyNet(config), payload["actor"], path, "actor")
     critics = tuple(_frozen(QNet(config), state, path, "critics")
                     for state in payload.get("critics", ()))
-    return Policy(actor, critics, float(payload.get("critic_unit", 1.0)))
+    verifier = (_frozen(QNet(config), payload["verifier"], path, "verifier")
+                if "verifier" in payload else None)
+    return Policy(actor, critics, float(payload.get("critic_unit", 1.0)), verifier)
 
 
 def _frozen(network: PolicyNet | QNet, state: dict[str, Tensor], path: Path,
@@ -207,6 +232,28 @@ class Decoding(Options):
                 f"{problem}; decode=sample runs its actor")
 
 
+class VerifyMargin(Interval):
+    """A number of J, with a policy whose file carries a verifier and ``decode=margin``."""
+
+    def __init__(self) -> None:
+        super().__init__(float, None, None)
+
+    def admits(self, value: Any, context: Mapping[str, Any]) -> bool:
+        return (context.get("decode", "margin") == "margin"
+                and policy_at(context.get("policy")).verifier is not None)
+
+    def depends_on(self) -> tuple[str, ...]:
+        return ("policy", "decode")
+
+    def describe(self, context: Mapping[str, Any]) -> str:
+        if context.get("decode", "margin") != "margin":
+            return "a number (J) only with decode=margin, whose deviations it checks"
+        if policy_at(context.get("policy")).verifier is None:
+            return ("a number (J) only with a policy file that carries a verifier (this "
+                    "one carries no verifier)")
+        return "a number (J)"
+
+
 class PolicySelection:
     """Selection rule: sample m* ~ pi(.|s) (Eq. 21). ``temperature`` divides the logits;
     0 takes the most probable task (lowest index on ties)."""
@@ -239,43 +286,73 @@ def margin_choice(values: np.ndarray, valid: np.ndarray, teacher: int, margin: f
     return best if values[best] - values[teacher] > margin else teacher
 
 
+#: Whether a deviation from HOCF's choice is taken: (view, state, the deviation's action,
+#: HOCF's action) -> bool.
+Confirmation = Callable[[DecisionView, Observation, int, int], bool]
+
+
 class MarginSelection:
     """Selection rule: HOCF's choice unless ``values`` (a batch of feature-set-3 states ->
-    one value per action, in J) rates another valid action more than ``margin`` above it."""
+    one value per action, in J) rates another valid action more than ``margin`` above it
+    and ``confirm`` (if given) confirms that deviation."""
 
-    def __init__(self, values: Callable[[Mapping[str, Tensor]], Tensor], margin: float) -> None:
-        self.values, self.margin = values, margin
+    def __init__(self, values: Callable[[Mapping[str, Tensor]], Tensor], margin: float,
+                 confirm: Confirmation | None = None) -> None:
+        self.values, self.margin, self.confirm = values, margin, confirm
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
         del rng  # deterministic given the state: the engine's generator orders the AAVs
         state = observe(view, MARGIN_FEATURES)
         with torch.inference_mode():
             values = self.values(collate([state]))[0].double().numpy()
-        action = margin_choice(values, state.action_mask, teacher_action(state), self.margin)
+        teacher = teacher_action(state)
+        action = margin_choice(values, state.action_mask, teacher, self.margin)
+        if action != teacher and self.confirm is not None and not self.confirm(
+                view, state, action, teacher):
+            action = teacher
         return action_choice(view, action, MARGIN_FEATURES)
+
+
+class VerifierCheck:
+    """Confirms a deviation iff ``verified`` (a batch of states -> one value per action, in
+    J) rates it more than ``margin`` above HOCF's action."""
+
+    def __init__(self, verified: Callable[[Mapping[str, Tensor]], Tensor], margin: float
+                 ) -> None:
+        self.verified, self.margin = verified, margin
+
+    def __call__(self, view: DecisionView, state: Observation, action: int,
+                 teacher: int) -> bool:
+        del view
+        with torch.inference_mode():
+            values = self.verified(collate([state]))[0].double()
+        return float(values[action] - values[teacher]) > self.margin
 
 
 class TSACOCFAllocator(OCFAllocator):
     """Settings: ``policy`` (a policy file; default the shipped one), ``decode`` (``margin``:
-    HOCF's choice unless the policy's critics back another by ``margin`` J; ``sample``: from
-    the actor at ``temperature``), and the engine's ``k_max``, ``c_max``, ``init``,
-    ``samples``."""
+    HOCF's choice unless the policy's critics back another by ``margin`` J and, with
+    ``verify`` a number, its verifier by ``verify`` J; ``sample``: from the actor at
+    ``temperature``), and the engine's ``k_max``, ``c_max``, ``init``, ``samples``."""
 
     name = "tsac-ocf"
     setting_constraints = declare(**OCFAllocator.setting_constraints,
                                   policy=NoneOr(PolicyFile()),
                                   decode=Decoding(),
                                   temperature=Interval(float, 0, None),
-                                  margin=Interval(float, 0, None))
+                                  margin=Interval(float, 0, None),
+                                  verify=NoneOr(VerifyMargin()))
 
     def __init__(self, policy: str | None = None, decode: str = "margin",
-                 temperature: float = 1.0, margin: float = MARGIN, k_max: int = K_MAX,
-                 c_max: int = C_MAX, init: str = INIT, samples: int = SAMPLES) -> None:
+                 temperature: float = 1.0, margin: float = MARGIN,
+                 verify: float | None = VERIFY, k_max: int = K_MAX, c_max: int = C_MAX,
+                 init: str = INIT, samples: int = SAMPLES) -> None:
         super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples)
         self.policy = policy
         self.decode = decode
         self.temperature = temperature
         self.margin = margin
+        self.verify = verify
 
     def rule(self, state: PlanningState) -> SelectionRule:
         del state
@@ -285,7 +362,12 @@ class TSACOCFAllocator(OCFAllocator):
             problem = margin_problem(policy)
             if problem is not None:
                 raise PolicyFileError(f"{self.policy or DEFAULT_POLICY}: decode=margin: {problem}")
-            return MarginSelection(policy.values, self.margin)
+            if self.verify is not None and policy.verifier is None:
+                raise PolicyFileError(f"{self.policy or DEFAULT_POLICY}: verify: its file "
+                                      f"carries no verifier")
+            confirm = (None if self.verify is None
+                       else VerifierCheck(policy.verified, self.verify))
+            return MarginSelection(policy.values, self.margin, confirm)
         return PolicySelection(policy.actor, self.temperature)
 
     def plan(self, state: PlanningState, *, seed: int = 0,

@@ -84,13 +84,7 @@ def random_state(rng: np.random.Generator, n_tasks: int, n_depots: int,
                        rng.normal(size=(n_depots, DEPOT_DIM)).astype(np.float32), mask)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small networks run fastest on one thread, and a shared machine stays usable."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture

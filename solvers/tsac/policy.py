@@ -11,8 +11,8 @@ task in one of two ways (``decode``):
   critics of a run trained on rollout labels rank actions well only near the states they
   were trained on; a deviation they back by a wide margin pays, a close call does not
   (reports/tsac-learnability.md measures both). With ``verify`` (a number), the policy
-  file's verifier (``tsac_verify``) must also rate the deviation more than ``verify`` J
-  above HOCF's choice.
+  file's verifier (``solvers/tsac/verify.py``) must also rate the deviation more than
+  ``verify`` J above HOCF's choice.
 
 Either way the engine's seeded generator drives the game, so a run is deterministic per seed.
 The default policy ships with the package (``solvers/tsac/policies/tsac-default.pt``, decoded
@@ -88,7 +88,7 @@ class PolicyFileError(TsacBenchError):
 class Policy:
     """A policy file's frozen networks, on the CPU: the actor and, from a run trained on
     rollout labels, its twin critics, whose values times ``critic_unit`` are J, and
-    possibly a deviation verifier (``tsac_verify``) in the same unit."""
+    possibly a deviation verifier (``solvers/tsac/verify.py``) in the same unit."""
 
     actor: PolicyNet
     critics: tuple[QNet, ...] = ()

@@ -118,7 +118,8 @@ def label_deviations(scale: str, instance_seed: int, policy: str | None, margin:
 
 @dataclass(frozen=True)
 class VerifierConfig:
-    #: The critics' margin whose deviations are labelled (and that decoding then uses).
+    #: The margin of the rule whose deviations are labelled (the verifier learns to check
+    #: that rule's deviations; decoding may use another).
     margin: float = 0.3
     rollouts: int = 4  # HOCF completions per action of a label
     #: Generated training instances per scale, seeds first_seed, first_seed + 1, ...: apart
@@ -126,7 +127,8 @@ class VerifierConfig:
     instances: tuple[tuple[str, int], ...] = (("4/10", 100), ("8/20", 300), ("16/40", 200),
                                               ("32/80", 60))
     first_seed: int = 700_000
-    held_out: float = 0.1  # the last share of each scale's instances: validation only
+    #: The last share of each scale's instances (at least one): validation only.
+    held_out: float = 0.1
     epochs: int = 30
     batch_size: int = 64
     lr: float = 3e-4
@@ -138,7 +140,7 @@ class VerifierConfig:
         margin=Interval(float, 0, None),
         rollouts=Interval(int, 1, None),
         first_seed=Interval(int, 0, None),
-        held_out=Interval(float, 0, 1, closed="left"),
+        held_out=Interval(float, 0, 1, closed="neither"),
         epochs=Interval(int, 0, None),
         batch_size=Interval(int, 1, None),
         lr=Interval(float, 0, None, closed="neither"),
@@ -286,7 +288,7 @@ def train_verifier(out: Path, policy: str | None, config: VerifierConfig,
     predicted = predicted_gains(verifier, held, source.critic_unit)
     by_scale = {scale: agreement(predicted[[i for i, h in enumerate(held) if h.scale == scale]],
                                  [h for h in held if h.scale == scale])
-                for scale, _ in config.instances}
+                for scale, _ in config.instances if any(h.scale == scale for h in held)}
     summary = {"config": config.to_dict(), "policy": str(policy or "shipped"),
                "labels": len(run.labels), "train": len(train), "held_out": len(held),
                "seconds_labelling": run.seconds, "seconds_fit": seconds_fit,

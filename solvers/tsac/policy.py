@@ -71,11 +71,12 @@ DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
 #: possibly none). Files of versions 1 (the actor alone) and 2 still load.
 POLICY_FORMAT = "tsac-bench/policy@3"
 _READABLE_FORMATS = ("tsac-bench/policy@1", "tsac-bench/policy@2", POLICY_FORMAT)
-#: The margin of ``decode="margin"`` (J), chosen on generated instances apart from the
-#: evaluation's (seeds 900000..900049, reports/tsac-learnability.md).
-MARGIN = 0.75
-#: The verifier margin of ``decode="margin"`` (J; None: no verifier check).
-VERIFY: float | None = None
+#: The margins of ``decode="margin"`` (J): the critics' and the verifier's (None: no
+#: verifier check), chosen together on generated instances apart from the evaluation's
+#: (seeds 900000..900299, reports/tsac-learnability.md, "A verifier of the critics'
+#: deviations"); before the verifier the critics' alone, 0.75.
+MARGIN = 0.5
+VERIFY: float | None = 0.25
 #: The feature set the margin rule needs: HOCF's choice is a column of its state.
 MARGIN_FEATURES = FEATURE_SETS[3]
 
@@ -233,24 +234,24 @@ class Decoding(Options):
 
 
 class VerifyMargin(Interval):
-    """A number of J, with a policy whose file carries a verifier and ``decode=margin``."""
+    """A number of J, with a policy whose file carries a verifier; any number with
+    ``decode=sample``, which ignores it (as ``decode=margin`` ignores ``temperature``)."""
 
     def __init__(self) -> None:
         super().__init__(float, None, None)
 
     def admits(self, value: Any, context: Mapping[str, Any]) -> bool:
-        return (context.get("decode", "margin") == "margin"
-                and policy_at(context.get("policy")).verifier is not None)
+        return (context.get("decode", "margin") != "margin"
+                or policy_at(context.get("policy")).verifier is not None)
 
     def depends_on(self) -> tuple[str, ...]:
         return ("policy", "decode")
 
     def describe(self, context: Mapping[str, Any]) -> str:
-        if context.get("decode", "margin") != "margin":
-            return "a number (J) only with decode=margin, whose deviations it checks"
-        if policy_at(context.get("policy")).verifier is None:
+        if (context.get("decode", "margin") == "margin"
+                and policy_at(context.get("policy")).verifier is None):
             return ("a number (J) only with a policy file that carries a verifier (this "
-                    "one carries no verifier)")
+                    "one carries none: verify=none decodes by the critics alone)")
         return "a number (J)"
 
 

@@ -96,7 +96,7 @@ def test_the_margin_rule_takes_only_the_deviations_its_check_confirms(tmp_path):
         return solve(instance, "tsac-ocf", seed=2, mode="dynamic",
                      settings={"policy": path, "margin": 0, **settings})
 
-    unchecked = margin_rule()
+    unchecked = margin_rule(verify="none")
     assert unchecked.cost != hocf.cost
     assert margin_rule(verify=1e9).solution.routes == hocf.solution.routes
     assert margin_rule(verify=-1e9).solution.routes == unchecked.solution.routes
@@ -134,13 +134,16 @@ def test_policy_files_carry_the_verifier_in_j(tmp_path):
     assert read_policy(random_policy(tmp_path / "p.pt")).verifier is None
 
 
-def test_verify_needs_a_verifier_and_the_margin_rule(tmp_path):
+def test_verify_needs_a_policy_with_a_verifier(tmp_path):
     without = str(random_policy(tmp_path / "p.pt"))
-    with pytest.raises(InvalidSetting, match=r"setting 'verify'.*carries no verifier"):
+    with pytest.raises(InvalidSetting, match=r"setting 'verify'.*carries none"):
         make_allocator("tsac-ocf", policy=without, verify=0)
+    with pytest.raises(InvalidSetting, match=r"got 0.25 \(its default\).*verify=none"):
+        make_allocator("tsac-ocf", policy=without)
+    assert make_allocator("tsac-ocf", policy=without, verify="none").verify is None
+    # decode=sample ignores it, as decode=margin ignores temperature.
+    assert make_allocator("tsac-ocf", policy=without, decode="sample").decode == "sample"
     with_it = str(random_policy(tmp_path / "v.pt", verifier=True))
-    with pytest.raises(InvalidSetting, match=r"setting 'verify'.*decode=margin"):
-        make_allocator("tsac-ocf", policy=with_it, decode="sample", verify=0)
     assert make_allocator("tsac-ocf", policy=with_it, verify="0.5").verify == 0.5
     with pytest.raises(PolicyFileError, match="verify: its file carries no verifier"):
         TSACOCFAllocator(without, verify=0.0).rule(PlanningState.static(generate("4/10", 1)))

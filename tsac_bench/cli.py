@@ -484,12 +484,13 @@ def train_verifier_command(
     if policy is not None and not policy.is_file():
         raise TsacBenchError(f"--policy: {policy} is not a file")
     # An unreadable policy file is a PolicyFileError: one line naming the file.
-    problem = margin_problem(policy_at(str(policy) if policy else None))
+    source = str(policy) if policy else None
+    problem = margin_problem(policy_at(source))
     if problem is not None:
         raise TsacBenchError(f"--policy: {policy or 'the shipped policy'}: {problem}")
     if labels is not None and not labels.is_file():
         raise TsacBenchError(f"--labels: {labels} is not a file")
-    summary = train_verifier(out, str(policy) if policy else None, config, workers, labels)
+    summary = train_verifier(out, source, config, workers, labels)
     console.print(f"{summary['labels']} labels ({summary['seconds_labelling']:.0f} s), fitted "
                   f"in {summary['seconds_fit']:.0f} s; policy: {out / 'policy.pt'}")
 

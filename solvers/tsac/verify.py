@@ -162,15 +162,20 @@ def _batches(labels: Sequence[DeviationLabel], size: int, rng: np.random.Generat
                torch.tensor([label.gain for label in part], dtype=torch.float32))
 
 
+def _deviation_gains(verifier: QNet, states: dict[str, torch.Tensor], actions: torch.Tensor,
+                     teachers: torch.Tensor, unit: float) -> torch.Tensor:
+    """The verifier's value (J) of each state's deviation minus that of HOCF's action."""
+    values = verifier(states) * unit
+    return (values.gather(1, actions[:, None]) - values.gather(1, teachers[:, None]))[:, 0]
+
+
 def predicted_gains(verifier: QNet, labels: Sequence[DeviationLabel], unit: float = 1.0
                     ) -> np.ndarray:
     """The verifier's gain (J) of each label's deviation over HOCF's action."""
     out = []
     with torch.inference_mode():
         for states, actions, teachers, _ in _batches(labels, 256, None):
-            values = verifier(states) * unit
-            out.append((values.gather(1, actions[:, None])
-                        - values.gather(1, teachers[:, None]))[:, 0].numpy())
+            out.append(_deviation_gains(verifier, states, actions, teachers, unit).numpy())
     return np.concatenate(out) if out else np.zeros(0)
 
 
@@ -200,9 +205,7 @@ def fit_verifier(policy: Policy, train: Sequence[DeviationLabel],
     for epoch in range(1, config.epochs + 1):
         verifier.train()
         for states, actions, teachers, gains in _batches(train, config.batch_size, rng):
-            values = verifier(states) * unit
-            predicted = (values.gather(1, actions[:, None])
-                         - values.gather(1, teachers[:, None]))[:, 0]
+            predicted = _deviation_gains(verifier, states, actions, teachers, unit)
             loss = F.huber_loss(predicted, gains, delta=config.huber)
             optimizer.zero_grad()
             loss.backward()

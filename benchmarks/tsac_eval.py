@@ -12,6 +12,9 @@ spec (``--row``, e.g. ``tsac-ocf:decode=margin``), the "incumbent" start
 its decisions, what a policy that follows HOCF elsewhere gains by deviating at random).
 Run by hand:
     python benchmarks/tsac_eval.py [--instances 10] [--first-seed 900000] [--policy FILE]
+        [--jobs N]
+With ``--jobs N`` the instances of a row run in N processes, each pinned to a core of its
+own (one core each, as a plan call is timed); without, the script pins itself to one core.
 Writes reports/tsac-eval.md (or ``--out``). Held-out instances: generator seeds
 first-seed .. first-seed + instances - 1 (training draws its instance seeds from a generator
 seeded by the training seed; a collision with this range is a 1-in-10^5 event per instance).
@@ -21,16 +24,20 @@ Method seed 0.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import platform
 import shlex
 import statistics
 import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 from paper_reproduction import instance_files
 
+from tsac_bench.model import Instance
 from tsac_bench.model.generator import generate
 from tsac_bench.model.io import read_instance
 from tsac_bench.planning import PlanningState, make_allocator
@@ -123,6 +130,54 @@ def paired_rows(scale: str, costs: dict[str, list[float]], reference: str) -> li
     return rows
 
 
+#: One dynamic run: (J, wall time of the run, its longest plan call, its plan calls whose
+#: stop was not "stable": an OCF game's budget stops).
+RunRecord = tuple[float, float, float, int]
+
+
+#: The rows this process has run once untimed: the first plan call of a process loads what
+#: the method needs (torch, a policy file), a cost paid once, not per plan call.
+_warmed: set[str] = set()
+
+
+def dynamic_run(label: str, instance: Instance, method: str | HOCFAllocator,
+                settings: dict) -> RunRecord:
+    if label not in _warmed:
+        solve(instance, method, seed=0, mode="dynamic", settings=settings)
+        _warmed.add(label)
+    began = time.perf_counter()
+    outcome = solve(instance, method, seed=0, mode="dynamic", settings=settings)
+    wall = time.perf_counter() - began
+    replans = outcome.stats["replans"]
+    unstable = sum(r["stats"]["stop"] != "stable" for r in replans)
+    return outcome.cost, wall, max(r["wall_time"] for r in replans), unstable
+
+
+def _pin_to_own_core(cores: multiprocessing.Queue) -> None:
+    os.sched_setaffinity(0, {cores.get()})
+
+
+def _dynamic_run_args(args: tuple[str, Instance, str | HOCFAllocator, dict]) -> RunRecord:
+    return dynamic_run(*args)
+
+
+def runner(jobs: int) -> tuple[Callable[[list[tuple]], list[RunRecord]], Callable[[], None]]:
+    """(run a list of ``dynamic_run`` argument tuples in order, close): in this process
+    (``jobs`` 1), or in ``jobs`` worker processes pinned to a core each."""
+    if jobs == 1:
+        return (lambda calls: [dynamic_run(*call) for call in calls]), (lambda: None)
+    cores = sorted(os.sched_getaffinity(0))
+    if jobs > len(cores):
+        raise SystemExit(f"--jobs {jobs}: only {len(cores)} cores to pin workers to")
+    context = multiprocessing.get_context("spawn")
+    queue = context.Queue()
+    for core in cores[:jobs]:
+        queue.put(core)
+    pool = ProcessPoolExecutor(jobs, mp_context=context, initializer=_pin_to_own_core,
+                               initargs=(queue,))
+    return (lambda calls: list(pool.map(_dynamic_run_args, calls))), pool.shutdown
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--instances", type=int, default=10)
@@ -149,8 +204,12 @@ def main() -> None:
                         help="add a table of every other row's per-instance difference in J "
                              "from this row's (mean, 95 %% interval, instances lower/higher); "
                              "repeatable, a table per reference row")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="worker processes, each pinned to a core of its own")
     parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
     args = parser.parse_args()
+    if args.jobs < 1:
+        parser.error("--jobs: at least 1")
     if "hocf" not in args.baselines:
         parser.error("--baselines: hocf is the reference of every row; keep it")
     baselines = tuple(args.baselines)
@@ -161,8 +220,9 @@ def main() -> None:
     for reference in args.paired:
         if reference not in labels:
             parser.error(f"--paired: no row {reference!r}; the rows: {', '.join(labels)}")
-    if hasattr(os, "sched_setaffinity"):
+    if args.jobs == 1 and hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    run_all, close = runner(args.jobs)
     seeds = range(args.first_seed, args.first_seed + args.instances)
     source = " --paper-mc" if args.paper_mc else f" --first-seed {args.first_seed}"
     command = (f"python benchmarks/tsac_eval.py --instances {args.instances}{source}"
@@ -174,7 +234,8 @@ def main() -> None:
                + (" --incumbent-rows" if args.incumbent_rows else "")
                + (" --temperatures" if args.temperatures else "")
                + "".join(f" --noise-control {share:g}" for share in args.noise_control)
-               + "".join(f" --paired {shlex.quote(p)}" for p in args.paired))
+               + "".join(f" --paired {shlex.quote(p)}" for p in args.paired)
+               + (f" --jobs {args.jobs}" if args.jobs > 1 else ""))
     names = [name.upper() for name in baselines]
     against = " and ".join(filter(None, [", ".join(names[:-1]), names[-1]]))
     lines = [
@@ -182,8 +243,10 @@ def main() -> None:
         "",
         f"Command: `{command}`  ",
         f"Machine: {platform.processor() or platform.machine()}, Python "
-        f"{platform.python_version()}, pinned to one core (shared with other work: wall "
-        f"times are indicative only). "
+        f"{platform.python_version()}, "
+        + (f"{args.jobs} processes, each pinned to a core of its own" if args.jobs > 1
+           else "pinned to one core")
+        + " (shared with other work: wall times are indicative only). "
         + (f"Instances: the first {args.instances} of `instances/paper-mc/` per scale "
            "(generator seeds 0.."
            f"{args.instances - 1}; training draws its instance seeds uniformly below 2^31, so "
@@ -198,8 +261,8 @@ def main() -> None:
         "it plays (`samples`).",
         "",
         "| scale | method | start, games | mean J | median J | mean wall (s) | "
-        "vs HOCF (mean J) | instances below HOCF |",
-        "|---|---|---|---:|---:|---:|---:|---:|",
+        "longest plan call (s) | vs HOCF (mean J) | instances below HOCF |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     unstable = 0
     paired_lines: dict[str, list[str]] = {reference: [] for reference in args.paired}
@@ -208,19 +271,18 @@ def main() -> None:
                      if args.paper_mc else [generate(scale, seed) for seed in seeds])
         costs: dict[str, list[float]] = {}
         walls: dict[str, list[float]] = {}
+        longest: dict[str, float] = {}
         rows = variants(args.policy, args.ablation, incumbent=args.incumbent_rows,
                         temperatures=args.temperatures, baselines=baselines,
                         noise=tuple(args.noise_control), specs=tuple(args.row))
         starts = {label: footing(method, settings) for label, method, settings in rows}
         for label, method, settings in rows:
-            for instance in instances:
-                began = time.perf_counter()
-                outcome = solve(instance, method, seed=0, mode="dynamic", settings=settings)
-                walls.setdefault(label, []).append(time.perf_counter() - began)
-                costs.setdefault(label, []).append(outcome.cost)
-                if starts[label] != DGA_START:
-                    unstable += sum(r["stats"]["stop"] != "stable"
-                                    for r in outcome.stats["replans"])
+            records = run_all([(label, instance, method, settings) for instance in instances])
+            costs[label] = [cost for cost, _, _, _ in records]
+            walls[label] = [wall for _, wall, _, _ in records]
+            longest[label] = max(call for _, _, call, _ in records)
+            if starts[label] != DGA_START:
+                unstable += sum(stops for _, _, _, stops in records)
             print(f"{scale} {label}: mean J {statistics.fmean(costs[label]):.2f}", flush=True)
         hocf = costs["hocf"]
         for label, values in costs.items():
@@ -229,7 +291,8 @@ def main() -> None:
             below = sum(v < h for v, h in zip(values, hocf, strict=True))
             lines.append(f"| {scale} | {label} | {starts[label]} | {mean:.2f} | "
                          f"{statistics.median(values):.2f} "
-                         f"| {statistics.fmean(walls[label]):.2f} | {100 * reduction:+.1f} % "
+                         f"| {statistics.fmean(walls[label]):.2f} | {longest[label]:.2f} "
+                         f"| {100 * reduction:+.1f} % "
                          f"| {below}/{len(values)} |")
         for reference, table in paired_lines.items():
             table += paired_rows(scale, costs, reference)
@@ -249,6 +312,7 @@ def main() -> None:
                   "lower / higher |",
                   "|---|---|---:|---:|---:|---:|",
                   *table, ""]
+    close()
     args.out.write_text("\n".join(lines))
     print("\n".join(lines))
 

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
+
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import tsac_eval
@@ -62,3 +65,25 @@ def test_ablation_and_temperature_rows_sample_an_actor_and_row_specs_run_as_give
         ("old", "tsac-ocf", {"policy": "old.pt", "decode": "sample"}),
         ("margin 1", "tsac-ocf:margin=1", {}),
     ]
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="worker processes are pinned to a core each")
+def test_worker_processes_give_the_runs_of_one_process_in_order() -> None:
+    from tsac_bench.model.generator import generate
+    from tsac_bench.planning.solve import solve
+
+    instances = [generate("4/10", seed) for seed in (3, 4)]
+    calls = [("hocf", instance, "hocf", {}) for instance in instances] + [
+        ("noise", instance, tsac_eval.NoiseControl(0.5), {}) for instance in instances]
+    in_process, _ = tsac_eval.runner(1)
+    in_workers, close = tsac_eval.runner(2)
+    try:
+        here, there = in_process(calls), in_workers(calls)
+    finally:
+        close()
+    assert [cost for cost, *_ in there] == [cost for cost, *_ in here]
+    assert here[0][0] == solve(instances[0], "hocf", mode="dynamic").cost
+    assert here[0][0] != here[1][0]  # the order of the calls is kept
+    assert all(0 < longest <= wall for _, wall, longest, _ in here + there)
+    assert all(stops == 0 for *_, stops in here)

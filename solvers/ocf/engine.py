@@ -39,7 +39,7 @@ import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
@@ -123,6 +123,10 @@ class CoalitionGame:
         self.rejected: list[set[int]] = [set() for _ in range(self.n_aavs)]
         self.passed: set[int] = set()  # AAVs that passed under the present structure
         self._proximity: tuple[int, Any] | None = None  # route_proximity's, per structure
+        # route_proximity's rows per AAV with the trace they were computed on; the list is
+        # replaced, never changed in place, so that a fork may share it.
+        self._proximity_rows: list[tuple[Any, np.ndarray, np.ndarray] | None] = (
+            [None] * self.n_aavs)
         self.trajectory: list[float] = [self.plan.cost]
         self.decisions: list[Decision] = []
         self.tabu_hits = 0
@@ -193,23 +197,29 @@ class CoalitionGame:
         node of its free route (anchor included) and its spare capacity there (capacity
         less the load it carries when it leaves that node). It depends on the structure
         only, which changes exactly when a move is accepted, so it is computed once per
-        accepted move (most decisions are rejections)."""
+        accepted move (most decisions are rejections), and then only for the AAV whose
+        route the move changed."""
         accepted = len(self.trajectory)
         if self._proximity is not None and self._proximity[0] == accepted:
             return self._proximity[1]
         instance, visible = self.instance, np.asarray(self.visible, dtype=int)
         columns = np.arange(len(visible))
         anchors = [self.anchor(k) for k in range(self.n_aavs)]
-        near = np.empty((self.n_aavs, len(visible)))
-        spare = np.empty((self.n_aavs, len(visible)))
+        rows = list(self._proximity_rows)
         for k, anchor in enumerate(anchors):
-            ff, trace = self.first_free[k], self.plan.traces[k]
+            trace = self.plan.traces[k]
+            if rows[k] is not None and rows[k][0] is trace:
+                continue
+            ff = self.first_free[k]
             nodes = [anchor.node, *(v.node for v in trace.route[ff:])]
             loads = np.array([trace.loads[ff - 1] if ff else 0, *trace.loads[ff:]])
             legs = instance.dist[np.ix_(nodes, visible)]
             closest = legs.argmin(axis=0)
-            near[k] = legs[closest, columns]
-            spare[k] = instance.aavs[k].capacity - loads[closest]
+            rows[k] = (trace, legs[closest, columns],
+                       instance.aavs[k].capacity - loads[closest])
+        self._proximity_rows = rows
+        near = np.array([row[1] for row in rows], dtype=float).reshape(self.n_aavs, len(visible))
+        spare = np.array([row[2] for row in rows], dtype=float).reshape(self.n_aavs, len(visible))
         self._proximity = (accepted, (anchors, near, spare))
         return anchors, near, spare
 
@@ -357,6 +367,10 @@ class DecisionView:
     game: CoalitionGame
     aav: int
     candidates: tuple[int, ...]
+    # A view lives for one decision, on one structure: each residual is computed once for
+    # the rule and the features that ask for it.
+    _residuals: dict[int, int] = field(default_factory=dict, init=False, repr=False,
+                                       compare=False)
 
     @property
     def anchor(self) -> Anchor:
@@ -371,7 +385,10 @@ class DecisionView:
         return self.aav in self.game.plan.members[m]
 
     def residual(self, m: int) -> int:
-        return self.game.residual(self.aav, m)
+        residual = self._residuals.get(m)
+        if residual is None:
+            residual = self._residuals[m] = self.game.residual(self.aav, m)
+        return residual
 
     def earliest_arrival(self, m: int) -> float:
         return self.game.earliest_arrival(self.aav, m)
@@ -403,7 +420,7 @@ class DecisionView:
             distance = game._dist[anchor.node][m]
             slack = task.t_end - (anchor.time + distance / instance.aavs[n].speed)
             rows.append((task.x / 1000, task.y / 1000, float(task.is_delivery), task.demand,
-                         game.residual(n, m), task.t_start / instance.horizon,
+                         self.residual(m), task.t_start / instance.horizon,
                          task.t_end / instance.horizon, task.release / instance.horizon,
                          len(members), game.plan.covered(m), float(own is not None),
                          own.amount if own is not None else 0, distance / 1000,

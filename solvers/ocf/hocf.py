@@ -22,7 +22,7 @@ with the lowest priority first.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -45,18 +45,24 @@ class HeuristicSelection:
         self.w_urgency, self.w_distance, self.w_residual = w_urgency, w_distance, w_residual
         self.d_max = float(instance.dist.max()) or 1.0
 
-    def priority(self, view: DecisionView, m: int) -> float:
+    def priorities(self, view: DecisionView, tasks: Sequence[int]) -> dict[int, float]:
+        """The priority score of each of ``tasks`` for the deciding AAV (module docstring);
+        the nodes of its free route are gathered once for all of them."""
         game, n = view.game, view.aav
         instance = game.instance
-        task = instance.tasks[m]
-        slack = task.t_end - view.earliest_arrival(m)
-        urgency = 1.0 - min(1.0, max(0.0, slack / instance.horizon))
-        dist = instance.dist_rows
         nodes = [view.anchor.node, *(v.node for v in game.route(n)[game.first_free[n]:])]
-        proximity = 1.0 - min(dist[k][m] for k in nodes) / self.d_max
-        share = min(view.residual(m), instance.aavs[n].capacity) / task.demand
-        return (self.w_urgency * urgency + self.w_distance * proximity
-                + self.w_residual * share)
+        nearest = instance.dist[np.ix_(nodes, tasks)].min(axis=0).tolist() if tasks else []
+        capacity = instance.aavs[n].capacity
+        scores = {}
+        for m, distance in zip(tasks, nearest, strict=True):
+            task = instance.tasks[m]
+            slack = task.t_end - view.earliest_arrival(m)
+            urgency = 1.0 - min(1.0, max(0.0, slack / instance.horizon))
+            proximity = 1.0 - distance / self.d_max
+            share = min(view.residual(m), capacity) / task.demand
+            scores[m] = (self.w_urgency * urgency + self.w_distance * proximity
+                         + self.w_residual * share)
+        return scores
 
     def ineffective(self, view: DecisionView, m: int) -> bool:
         game, n = view.game, view.aav
@@ -66,7 +72,7 @@ class HeuristicSelection:
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
         del rng  # deterministic given the structure; the engine's permutation is random
-        return self.choice(view, lambda m: self.priority(view, m))
+        return self.choice(view, self.priorities(view, view.candidates).__getitem__)
 
     def choice(self, view: DecisionView, priority: Callable[[int], float]) -> int:
         """The rule given the priorities (``select``'s, or ones already computed, as the

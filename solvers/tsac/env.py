@@ -127,7 +127,7 @@ def teacher_features(view: DecisionView) -> np.ndarray:
     teacher = HOCFAllocator()
     weights = teacher.w_urgency, teacher.w_distance, teacher.w_residual
     rule = HeuristicSelection(view.game.instance, *weights)
-    priority = {m: rule.priority(view, m) for m in view.game.visible}
+    priority = rule.priorities(view, view.game.visible)
     total = sum(weights)
     # A terminal state (no candidate) has no choice to mark.
     choice = rule.choice(view, priority.__getitem__) if view.candidates else None

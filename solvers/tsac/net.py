@@ -21,6 +21,7 @@ from typing import Protocol
 import numpy as np
 import torch
 from torch import Tensor, nn
+from torch.nn import functional as F
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,81 @@ class TokenHead(nn.Module):
         encoded = self.encoder(obs["agent"], obs["tasks"], obs["task_mask"], obs["depots"],
                                obs["depot_mask"], obs.get("pass_token"))
         return self.head(encoded).squeeze(-1)
+
+
+class StackedHeads(nn.Module):
+    """Several frozen ``TokenHead``s of one config (the twin critics) evaluated in one pass:
+    ``forward`` gives ``(heads, batch, actions)``, each head's values as its own
+    ``forward`` gives them, to float rounding (tests/solvers/test_tsac_net.py holds it to
+    that). Why: at plan time a decision is one small state, and torch's per-operation
+    overhead, not arithmetic, is its cost, so two heads with their weights stacked cost what
+    one does. For inference only: the weights are copied, not shared."""
+
+    def __init__(self, heads: Sequence[TokenHead]) -> None:
+        super().__init__()
+        config = heads[0].config
+        if any(head.config != config for head in heads):
+            raise ValueError("stacked heads must share one config")
+        if not all(layer.norm_first and layer.activation_relu_or_gelu == 1
+                   for layer in heads[0].encoder.transformer.layers):
+            raise ValueError("StackedHeads computes StateEncoder's pre-norm ReLU layers only")
+        self.config = config
+        self.eps = heads[0].encoder.transformer.layers[0].norm1.eps
+        states = [head.state_dict() for head in heads]
+        self.weights: dict[str, tuple[Tensor, Tensor]] = {}
+        for name in states[0]:
+            if not name.endswith("weight"):
+                continue
+            stem = name[:-len("weight")]
+            weight = torch.stack([s[name] for s in states])
+            bias = torch.stack([s[stem + "bias"] for s in states])[:, None, None, :]
+            # Linear weights (heads, out, in) as (heads, 1, in, out), for x @ w over a batch;
+            # layer-norm scales (heads, d) as (heads, 1, 1, d).
+            weight = (weight.transpose(1, 2).unsqueeze(1) if weight.dim() == 3
+                      else weight[:, None, None, :])
+            self.weights[stem.rstrip("._")] = (weight.contiguous(), bias.contiguous())
+
+    def _linear(self, x: Tensor, name: str) -> Tensor:
+        weight, bias = self.weights[name]
+        return torch.matmul(x, weight) + bias
+
+    def _mlp(self, x: Tensor, name: str) -> Tensor:
+        return self._linear(torch.relu(self._linear(x, f"{name}.0")), f"{name}.2")
+
+    def _norm(self, x: Tensor, name: str) -> Tensor:
+        scale, shift = self.weights[name]
+        return F.layer_norm(x, x.shape[-1:], eps=self.eps) * scale + shift
+
+    def forward(self, obs: Mapping[str, Tensor]) -> Tensor:
+        parts = [self._mlp(obs["tasks"], "encoder.task"), self._mlp(obs["depots"],
+                                                                      "encoder.depot")]
+        masks = [obs["task_mask"], obs["depot_mask"]]
+        pass_token = obs.get("pass_token")
+        if pass_token is not None:
+            parts.insert(0, self._mlp(pass_token.unsqueeze(1), "encoder.depot"))
+            masks.insert(0, torch.ones_like(obs["task_mask"][:, :1]))
+        n_actions = obs["tasks"].shape[1] + (pass_token is not None)
+        tokens = torch.cat(parts, dim=2)
+        heads, batch, length, d = tokens.shape
+        context = self._mlp(obs["agent"].unsqueeze(1), "encoder.agent")
+        x = self._linear(torch.cat([context.expand_as(tokens), tokens], dim=-1), "encoder.fuse")
+        real = torch.cat(masks, dim=1)
+        attend = (None if bool(real.all()) else
+                  real[None, :, None, None, :].expand(heads, -1, -1, -1, -1).flatten(0, 1))
+        n_heads = self.config.heads
+        for i in range(self.config.layers):
+            layer = f"encoder.transformer.layers.{i}"
+            h = self._norm(x, f"{layer}.norm1")
+            qkv = self._linear(h, f"{layer}.self_attn.in_proj")
+            q, k, v = qkv.view(heads * batch, length, 3, n_heads, d // n_heads).permute(
+                2, 0, 3, 1, 4)
+            attention = F.scaled_dot_product_attention(q, k, v, attn_mask=attend)
+            attention = attention.transpose(1, 2).reshape(heads, batch, length, d)
+            x = x + self._linear(attention, f"{layer}.self_attn.out_proj")
+            h = self._norm(x, f"{layer}.norm2")
+            x = x + self._linear(torch.relu(self._linear(h, f"{layer}.linear1")),
+                                 f"{layer}.linear2")
+        return self._mlp(x[:, :, :n_actions], "head").squeeze(-1)
 
 
 class PolicyNet(TokenHead):

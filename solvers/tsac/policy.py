@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +63,7 @@ from tsac_bench.solvers.tsac.env import (
     observe,
     teacher_action,
 )
-from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate
+from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, StackedHeads, collate
 
 DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
 #: Version 2 adds the run's twin critics (``critics``, possibly none) and the J one unit of
@@ -96,9 +96,13 @@ class Policy:
     critic_unit: float = 1.0
     verifier: QNet | None = None
 
+    @cached_property
+    def _critic_pass(self) -> StackedHeads:
+        return StackedHeads(self.critics)
+
     def values(self, obs: Mapping[str, Tensor]) -> Tensor:
         """The pessimistic (minimum) twin-critic value of each action, in J."""
-        return torch.minimum(*(critic(obs) for critic in self.critics)) * self.critic_unit
+        return self._critic_pass(obs).min(dim=0).values * self.critic_unit
 
     def verified(self, obs: Mapping[str, Tensor]) -> Tensor:
         """The verifier's value of each action, in J."""

@@ -207,12 +207,37 @@ def test_hocf_prefers_the_nearer_of_two_otherwise_equal_tasks():
     game = CoalitionGame(PlanningState.static(instance))
     view = DecisionView(game, 0, tuple(game.valid_tasks(0)))
     hocf = HeuristicSelection(instance, 1.0, 2.0, 1.0)
-    near, far = hocf.priority(view, 1), hocf.priority(view, 0)
+    scores = hocf.priorities(view, (0, 1))
+    near, far = scores[1], scores[0]
+    # Scored together or one at a time, the same numbers.
+    assert (hocf.priorities(view, (1,))[1], hocf.priorities(view, (0,))[0]) == (near, far)
     d_max = float(instance.dist.max())
     # Same window and share. Proximity differs by 3 km; urgency by the 300 s more slack
     # the near task leaves (it is reached earlier), against it.
     assert near - far == pytest.approx(2.0 * 3000 / d_max - 300 / 3600, rel=1e-12)
     assert hocf.select(view, np.random.default_rng(0)) == 1
+
+
+def test_route_proximity_kept_across_moves_equals_one_computed_afresh():
+    """Rows of AAVs whose routes a move left alone are kept; the result must be what a
+    fresh game on the same structure computes."""
+    state = PlanningState.static(generate("8/20", seed=4))
+    game = CoalitionGame(state)
+    hocf = HeuristicSelection(state.instance, 1.0, 2.0, 1.0)
+    checked = []
+
+    class Checking:
+        def select(self, view, rng):
+            kept = game.route_proximity()
+            afresh = CoalitionGame(state, game.plan.routes).route_proximity()
+            assert kept[0] == afresh[0]
+            np.testing.assert_array_equal(kept[1], afresh[1])
+            np.testing.assert_array_equal(kept[2], afresh[2])
+            checked.append(len(game.trajectory))
+            return hocf.select(view, rng)
+
+    game.run(Checking(), np.random.default_rng(0), k_max=60, c_max=C_MAX)
+    assert len(set(checked)) > 5  # checked after several accepted moves
 
 
 def test_stop_conditions():

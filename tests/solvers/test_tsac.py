@@ -39,7 +39,13 @@ from tsac_bench.solvers.tsac.env import (  # noqa: E402
     replan_moments,
     unpad,
 )
-from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate  # noqa: E402
+from tsac_bench.solvers.tsac.net import (  # noqa: E402
+    NetConfig,
+    PolicyNet,
+    QNet,
+    StackedHeads,
+    collate,
+)
 from tsac_bench.solvers.tsac.policy import (  # noqa: E402
     DEFAULT_POLICY,
     MARGIN_FEATURES,
@@ -319,9 +325,15 @@ def test_feature_set_3_adds_hocf_priority_and_choice_as_teacher_columns():
     choice = hocf.select(view, np.random.default_rng(7))
     priority, chosen = three.tasks[:, -2], three.tasks[:, -1]
     assert chosen.sum() == 1.0 and game.visible[int(np.argmax(chosen))] == choice
-    # By hand for one task: the weights 1, 2, 1 sum to 4.
-    m = game.visible[3]
-    assert priority[3] == pytest.approx(hocf.priority(view, m) / 4, rel=1e-6)
+    # By hand for one task (module docstring of hocf.py): the weights 1, 2, 1 sum to 4.
+    m, n, instance = game.visible[3], view.aav, game.instance
+    task, anchor = instance.tasks[m], view.anchor
+    slack = task.t_end - (anchor.time + instance.dist[anchor.node, m] / instance.aavs[n].speed)
+    urgency = 1.0 - min(1.0, max(0.0, slack / instance.horizon))
+    free_route = [anchor.node, *(v.node for v in game.route(n)[game.first_free[n]:])]
+    proximity = 1.0 - min(instance.dist[k, m] for k in free_route) / instance.dist.max()
+    share = min(view.residual(m), instance.aavs[n].capacity) / task.demand
+    assert priority[3] == pytest.approx((urgency + 2 * proximity + share) / 4, rel=1e-6)
     assert ((priority >= 0) & (priority <= 1)).all()
     # Zero-padded like every other column.
     gym_form = pad(three, 80, 8)
@@ -351,6 +363,28 @@ def test_padding_never_changes_the_real_tokens_with_competition_and_pass():
     back = unpad(gym_form)
     np.testing.assert_array_equal(back.action_mask, state.action_mask)
     np.testing.assert_array_equal(back.pass_token, state.pass_token)
+
+
+@pytest.mark.parametrize("config", [SMALL, SMALL_V2], ids=["tasks only", "pass token"])
+def test_stacked_heads_give_each_heads_values_of_the_real_actions(config):
+    torch.manual_seed(4)
+    heads = [QNet(config).eval() for _ in range(3)]
+    stacked = StackedHeads(heads)
+    features = FEATURE_SETS[config.features]
+    states = [observe(mid_game(scale, seed)[1], features)
+              for scale, seed in (("8/20", 3), ("16/40", 5), ("4/10", 2))]
+    for batch in ([states[0]], states):  # alone, and padded by longer and shorter states
+        obs = collate(batch)
+        with torch.inference_mode():
+            values = stacked(obs)
+            assert values.shape == (3, *obs["action_mask"].shape)
+            for i, state in enumerate(batch):
+                width = features.offset + len(state.tasks)
+                for head, stacked_values in zip(heads, values, strict=True):
+                    torch.testing.assert_close(stacked_values[i, :width],
+                                               head(obs)[i, :width], rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="one config"):
+        StackedHeads([QNet(SMALL), QNet(SMALL_V2)])
 
 
 def test_the_environment_with_feature_set_2_passes_and_ends_stable():
@@ -653,7 +687,8 @@ def test_policy_files_carry_the_critics_in_j(tmp_path):
     n = next(n for n in range(game.n_aavs) if game.candidates(n))
     obs = collate([observe(DecisionView(game, n, game.candidates(n)), MARGIN_FEATURES)])
     first, second = (q(obs) for q in policy.critics)
-    assert torch.equal(policy.values(obs), 2.5 * torch.minimum(first, second))
+    # The critics run in one stacked pass (StackedHeads): their values to float rounding.
+    torch.testing.assert_close(policy.values(obs), 2.5 * torch.minimum(first, second))
     # A version 1 file (the actor alone) still loads, without critics.
     assert read_policy(POLICY_1).critics == ()
     assert len(read_policy(DEFAULT_POLICY).critics) == 2

@@ -100,16 +100,15 @@ class TokenHead(nn.Module):
         return self.head(encoded).squeeze(-1)
 
 
-class StackedHeads(nn.Module):
+class StackedHeads:
     """Several frozen ``TokenHead``s of one config (the twin critics) evaluated in one pass:
-    ``forward`` gives ``(heads, batch, actions)``, each head's values as its own
-    ``forward`` gives them, to float rounding (tests/solvers/test_tsac_net.py holds it to
-    that). Why: at plan time a decision is one small state, and torch's per-operation
-    overhead, not arithmetic, is its cost, so two heads with their weights stacked cost what
-    one does. For inference only: the weights are copied, not shared."""
+    a call gives ``(heads, batch, actions)``, each head's values as its own ``forward``
+    gives them, to float rounding (tests/solvers/test_tsac.py holds it to that). Why: at
+    plan time a decision is one small state, and torch's per-operation overhead, not
+    arithmetic, is its cost, so two heads with their weights stacked cost what one does.
+    For inference on the CPU only: the weights are copies, taken when it is built."""
 
     def __init__(self, heads: Sequence[TokenHead]) -> None:
-        super().__init__()
         config = heads[0].config
         if any(head.config != config for head in heads):
             raise ValueError("stacked heads must share one config")
@@ -143,7 +142,7 @@ class StackedHeads(nn.Module):
         scale, shift = self.weights[name]
         return F.layer_norm(x, x.shape[-1:], eps=self.eps) * scale + shift
 
-    def forward(self, obs: Mapping[str, Tensor]) -> Tensor:
+    def __call__(self, obs: Mapping[str, Tensor]) -> Tensor:
         parts = [self._mlp(obs["tasks"], "encoder.task"), self._mlp(obs["depots"],
                                                                       "encoder.depot")]
         masks = [obs["task_mask"], obs["depot_mask"]]

@@ -30,8 +30,9 @@ import platform
 import shlex
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
+from itertools import repeat
 from pathlib import Path
 
 import numpy as np
@@ -157,25 +158,19 @@ def _pin_to_own_core(cores: multiprocessing.Queue) -> None:
     os.sched_setaffinity(0, {cores.get()})
 
 
-def _dynamic_run_args(args: tuple[str, Instance, str | HOCFAllocator, dict]) -> RunRecord:
-    return dynamic_run(*args)
-
-
-def runner(jobs: int) -> tuple[Callable[[list[tuple]], list[RunRecord]], Callable[[], None]]:
-    """(run a list of ``dynamic_run`` argument tuples in order, close): in this process
-    (``jobs`` 1), or in ``jobs`` worker processes pinned to a core each."""
+def runner(jobs: int) -> tuple[Callable[..., Iterator], Callable[[], None]]:
+    """(a ``map`` that keeps the order, close): the built-in one (``jobs`` 1), or that of
+    ``jobs`` worker processes pinned to a core each (at most the cores this process may
+    use)."""
     if jobs == 1:
-        return (lambda calls: [dynamic_run(*call) for call in calls]), (lambda: None)
-    cores = sorted(os.sched_getaffinity(0))
-    if jobs > len(cores):
-        raise SystemExit(f"--jobs {jobs}: only {len(cores)} cores to pin workers to")
+        return map, lambda: None
     context = multiprocessing.get_context("spawn")
     queue = context.Queue()
-    for core in cores[:jobs]:
+    for core in sorted(os.sched_getaffinity(0))[:jobs]:
         queue.put(core)
     pool = ProcessPoolExecutor(jobs, mp_context=context, initializer=_pin_to_own_core,
                                initargs=(queue,))
-    return (lambda calls: list(pool.map(_dynamic_run_args, calls))), pool.shutdown
+    return pool.map, pool.shutdown
 
 
 def main() -> None:
@@ -208,8 +203,9 @@ def main() -> None:
                         help="worker processes, each pinned to a core of its own")
     parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
     args = parser.parse_args()
-    if args.jobs < 1:
-        parser.error("--jobs: at least 1")
+    if not 1 <= args.jobs <= len(os.sched_getaffinity(0)):
+        parser.error(f"--jobs: from 1 to the {len(os.sched_getaffinity(0))} cores to pin "
+                     "workers to")
     if "hocf" not in args.baselines:
         parser.error("--baselines: hocf is the reference of every row; keep it")
     baselines = tuple(args.baselines)
@@ -222,7 +218,7 @@ def main() -> None:
             parser.error(f"--paired: no row {reference!r}; the rows: {', '.join(labels)}")
     if args.jobs == 1 and hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-    run_all, close = runner(args.jobs)
+    mapped, close = runner(args.jobs)
     seeds = range(args.first_seed, args.first_seed + args.instances)
     source = " --paper-mc" if args.paper_mc else f" --first-seed {args.first_seed}"
     command = (f"python benchmarks/tsac_eval.py --instances {args.instances}{source}"
@@ -277,7 +273,8 @@ def main() -> None:
                         noise=tuple(args.noise_control), specs=tuple(args.row))
         starts = {label: footing(method, settings) for label, method, settings in rows}
         for label, method, settings in rows:
-            records = run_all([(label, instance, method, settings) for instance in instances])
+            records = list(mapped(dynamic_run, repeat(label), instances, repeat(method),
+                                  repeat(settings)))
             costs[label] = [cost for cost, _, _, _ in records]
             walls[label] = [wall for _, wall, _, _ in records]
             longest[label] = max(call for _, _, call, _ in records)

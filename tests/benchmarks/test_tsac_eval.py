@@ -74,12 +74,14 @@ def test_worker_processes_give_the_runs_of_one_process_in_order() -> None:
     from tsac_bench.planning.solve import solve
 
     instances = [generate("4/10", seed) for seed in (3, 4)]
-    calls = [("hocf", instance, "hocf", {}) for instance in instances] + [
-        ("noise", instance, tsac_eval.NoiseControl(0.5), {}) for instance in instances]
+    calls = list(zip(*[("hocf", instance, "hocf", {}) for instance in instances] + [
+        ("noise", instance, tsac_eval.NoiseControl(0.5), {}) for instance in instances],
+        strict=True))
     in_process, _ = tsac_eval.runner(1)
     in_workers, close = tsac_eval.runner(2)
     try:
-        here, there = in_process(calls), in_workers(calls)
+        here = list(in_process(tsac_eval.dynamic_run, *calls))
+        there = list(in_workers(tsac_eval.dynamic_run, *calls))
     finally:
         close()
     assert [cost for cost, *_ in there] == [cost for cost, *_ in here]

@@ -9,6 +9,8 @@ from builders import plan
 
 from tsac_bench.model import Solution
 from tsac_bench.model.evaluator import CostEvaluator, InfeasibleSolution
+from tsac_bench.model.generator import generate
+from tsac_bench.planning.solve import solve
 
 UNSERVED = 110.0
 
@@ -124,6 +126,27 @@ def test_plan_state_tracks_cost_and_coverage(hand):
     assert delta == pytest.approx(50 + 10 * 250 / 3600 + 0.015625 - UNSERVED, rel=1e-15)
     assert state.covered(0) == 5 and state.covered(0, exclude=1) == 0
     assert state.propose(0, plan(hand, A0=[("T3", 5), "D0"]).routes[0]) is None
+
+
+def test_plan_state_coverage_kept_across_route_changes_equals_a_fresh_states():
+    instance = generate("8/20", seed=3)
+    evaluator = CostEvaluator(instance)
+    routes = solve(instance, "greedy", seed=0).solution.routes
+    state = evaluator.state(Solution.empty(instance).routes)
+    # Every AAV's route set, then every other one emptied again: covered() is kept by the
+    # changes, never recomputed from scratch.
+    changes = [*enumerate(routes), *((n, ()) for n in range(0, instance.n_aavs, 2))]
+    for n, route in changes:
+        state.set_route(n, route)
+        fresh = evaluator.state(state.routes)
+        for m in range(instance.n_tasks):
+            t_end = instance.tasks[m].latest_on_time
+            assert state.covered(m) == fresh.covered(m) == sum(
+                c.amount for c in fresh.members[m].values() if c.arrival <= t_end)
+            assert [state.covered(m, exclude=k) for k in range(instance.n_aavs)] == [
+                fresh.covered(m, exclude=k) for k in range(instance.n_aavs)]
+    assert 0 < sum(state.covered(m) for m in range(instance.n_tasks)) < sum(
+        evaluator.state(routes).covered(m) for m in range(instance.n_tasks))
 
 
 def stamped(instance, aav, visits):

@@ -39,13 +39,14 @@ import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
 from tsac_bench.model import Route
-from tsac_bench.model.evaluator import PlanState, Proposal
+from tsac_bench.model.evaluator import Contribution, PlanState, Proposal
 from tsac_bench.planning import (
     Anchor,
     Interval,
@@ -109,9 +110,19 @@ class CoalitionGame:
         self.first_free = [state.first_free(n) for n in range(self.n_aavs)]
         self.anchors = [state.anchor(n) for n in range(self.n_aavs)]
         self.visible = sorted(state.visible)
+        self._visible_nodes = np.asarray(self.visible, dtype=int)
+        self.visible_index = {m: i for i, m in enumerate(self.visible)}
+        self._visible_demand = np.array([instance.tasks[m].demand for m in self.visible],
+                                        dtype=int)
+        # DecisionView.task_features' columns that depend on the task alone (and t_end, for
+        # the slack), once per game rather than once per decision.
+        horizon = instance.horizon
+        self._task_columns = np.array(
+            [(t.x / 1000, t.y / 1000, float(t.is_delivery), t.demand, t.t_start / horizon,
+              t.t_end / horizon, t.release / horizon, t.t_end)
+             for t in (instance.tasks[m] for m in self.visible)], dtype=float).reshape(-1, 8)
         self._dist = instance.dist_rows
         self._latest_on_time = [t.latest_on_time for t in instance.tasks]
-        self._demand = [t.demand for t in instance.tasks]
         self._speed = [a.speed for a in instance.aavs]
         self._range = [a.max_range for a in instance.aavs]
         self._aav_keys = [structure_key(n, t.route, self.n_tasks)
@@ -123,6 +134,7 @@ class CoalitionGame:
         self.rejected: list[set[int]] = [set() for _ in range(self.n_aavs)]
         self.passed: set[int] = set()  # AAVs that passed under the present structure
         self._proximity: tuple[int, Any] | None = None  # route_proximity's, per structure
+        self._residuals: tuple[tuple[int, int], np.ndarray] | None = None  # per (AAV, structure)
         # route_proximity's rows per AAV with the trace they were computed on; the list is
         # replaced, never changed in place, so that a fork may share it.
         self._proximity_rows: list[tuple[Any, np.ndarray, np.ndarray] | None] = (
@@ -156,15 +168,38 @@ class CoalitionGame:
         """Where AAV n's free route begins and when it can leave (fixed by its prefix)."""
         return self.anchors[n]
 
-    def residual(self, n: int, m: int) -> int:
-        """Eq. 19: task m's demand less what the AAVs other than n bring on time."""
-        return max(0, self._demand[m] - self.plan.covered(m, exclude=n))
+    def residuals(self, n: int) -> np.ndarray:
+        """Eq. 19 for AAV n over the visible tasks (``visible`` order): each task's demand
+        less what the AAVs other than n bring on time, at least 0. Kept for the last
+        (AAV, structure) asked: the validity mask, the rule and the features all need it."""
+        key = (n, len(self.trajectory))
+        if self._residuals is not None and self._residuals[0] == key:
+            return self._residuals[1]
+        on_time = self.plan.on_time
+        covered = np.array([on_time[m] for m in self.visible], dtype=int)
+        for m, own in self.own_visits(n):
+            if own.arrival <= self._latest_on_time[m]:
+                covered[self.visible_index[m]] -= own.amount
+        residuals = np.maximum(0, self._visible_demand - covered)
+        residuals.flags.writeable = False  # shared by every caller until the next move
+        self._residuals = (key, residuals)
+        return residuals
 
-    def earliest_arrival(self, n: int, m: int, anchor: Anchor | None = None) -> float:
-        """A lower bound on AAV n's arrival at m wherever it is inserted (triangle
-        inequality: every later position is reached via the anchor)."""
-        a = anchor or self.anchor(n)
-        return a.time + self._dist[a.node][m] / self._speed[n]
+    def residual(self, n: int, m: int) -> int:
+        """``residuals(n)`` of visible task m."""
+        return int(self.residuals(n)[self.visible_index[m]])
+
+    def own_visits(self, n: int) -> list[tuple[int, Contribution]]:
+        """AAV n's contribution to each visible task it serves."""
+        members, index = self.plan.members, self.visible_index
+        return [(m, members[m][n]) for m in dict(self.plan.traces[n].contributions)
+                if m in index]
+
+    def earliest_arrivals(self, n: int, tasks: np.ndarray) -> np.ndarray:
+        """A lower bound on AAV n's arrival at each of ``tasks`` wherever it is inserted
+        (triangle inequality: every later position is reached via the anchor)."""
+        anchor = self.anchors[n]
+        return anchor.time + self.instance.dist[anchor.node, tasks] / self._speed[n]
 
     def removable(self, n: int) -> list[int]:
         """AAV n's task visits at or after its first free position."""
@@ -173,40 +208,51 @@ class CoalitionGame:
     def valid_tasks(self, n: int) -> list[int]:
         """The validity mask: tasks AAV n could join (residual left, reachable on time and
         within range from its anchor) plus its own removable tasks, ascending."""
-        anchor = self.anchor(n)
         own = {v.node for v in self.route(n)}
         removable = set(self.removable(n))
-        row = self._dist[anchor.node]
-        speed, reach = self._speed[n], self._range[n] - anchor.flown
         valid = []
-        for m in self.visible:
+        for m, reachable, residual in zip(self.visible, self._reachable_rows[n],
+                                          self.residuals(n).tolist(), strict=True):
             if m in own:
                 if m in removable:
                     valid.append(m)
-            elif (row[m] <= reach and anchor.time + row[m] / speed <= self._latest_on_time[m]
-                  and self.residual(n, m) >= 1):
+            elif reachable and residual >= 1:
                 valid.append(m)
         return valid
+
+    @cached_property
+    def reachable(self) -> np.ndarray:
+        """Per (AAV, visible task): whether the AAV reaches the task on time and within range
+        from its anchor. Anchors are fixed for a game, so this is computed once."""
+        visible = self._visible_nodes
+        legs = self.instance.dist[np.ix_([a.node for a in self.anchors], visible)]
+        range_left = np.array([r - a.flown for r, a in zip(self._range, self.anchors,
+                                                           strict=True)])[:, None]
+        arrivals = np.array([self.earliest_arrivals(n, visible) for n in range(self.n_aavs)])
+        latest = np.array(self._latest_on_time)[visible]
+        return (legs <= range_left) & (arrivals <= latest)
+
+    @cached_property
+    def _reachable_rows(self) -> list[list[bool]]:
+        return self.reachable.tolist()
 
     def candidates(self, n: int) -> tuple[int, ...]:
         rejected = self.rejected[n]
         return tuple(m for m in self.valid_tasks(n) if m not in rejected)
 
-    def route_proximity(self) -> tuple[list[Anchor], np.ndarray, np.ndarray]:
-        """Every AAV's anchor and, per (AAV, visible task), the distance from the nearest
-        node of its free route (anchor included) and its spare capacity there (capacity
-        less the load it carries when it leaves that node). It depends on the structure
-        only, which changes exactly when a move is accepted, so it is computed once per
-        accepted move (most decisions are rejections), and then only for the AAV whose
-        route the move changed."""
+    def route_proximity(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per (AAV, visible task), the distance from the nearest node of its free route
+        (anchor included) and its spare capacity there (capacity less the load it carries
+        when it leaves that node). It depends on the structure only, which changes exactly
+        when a move is accepted, so it is computed once per accepted move (most decisions
+        are rejections), and then only for the AAV whose route the move changed."""
         accepted = len(self.trajectory)
         if self._proximity is not None and self._proximity[0] == accepted:
             return self._proximity[1]
-        instance, visible = self.instance, np.asarray(self.visible, dtype=int)
+        instance, visible = self.instance, self._visible_nodes
         columns = np.arange(len(visible))
-        anchors = [self.anchor(k) for k in range(self.n_aavs)]
         rows = list(self._proximity_rows)
-        for k, anchor in enumerate(anchors):
+        for k, anchor in enumerate(self.anchors):
             trace = self.plan.traces[k]
             if rows[k] is not None and rows[k][0] is trace:
                 continue
@@ -220,8 +266,8 @@ class CoalitionGame:
         self._proximity_rows = rows
         near = np.array([row[1] for row in rows], dtype=float).reshape(self.n_aavs, len(visible))
         spare = np.array([row[2] for row in rows], dtype=float).reshape(self.n_aavs, len(visible))
-        self._proximity = (accepted, (anchors, near, spare))
-        return anchors, near, spare
+        self._proximity = (accepted, (near, spare))
+        return near, spare
 
     # --- moves -------------------------------------------------------------------------
     def move(self, n: int, m: int) -> Move | None:
@@ -367,10 +413,6 @@ class DecisionView:
     game: CoalitionGame
     aav: int
     candidates: tuple[int, ...]
-    # A view lives for one decision, on one structure: each residual is computed once for
-    # the rule and the features that ask for it.
-    _residuals: dict[int, int] = field(default_factory=dict, init=False, repr=False,
-                                       compare=False)
 
     @property
     def anchor(self) -> Anchor:
@@ -384,14 +426,15 @@ class DecisionView:
     def is_member(self, m: int) -> bool:
         return self.aav in self.game.plan.members[m]
 
-    def residual(self, m: int) -> int:
-        residual = self._residuals.get(m)
-        if residual is None:
-            residual = self._residuals[m] = self.game.residual(self.aav, m)
-        return residual
+    def residuals(self) -> np.ndarray:
+        """``CoalitionGame.residuals`` of the deciding AAV (``game.visible`` order)."""
+        return self.game.residuals(self.aav)
 
-    def earliest_arrival(self, m: int) -> float:
-        return self.game.earliest_arrival(self.aav, m)
+    def residual(self, m: int) -> int:
+        return self.game.residual(self.aav, m)
+
+    def earliest_arrivals(self, tasks: np.ndarray) -> np.ndarray:
+        return self.game.earliest_arrivals(self.aav, tasks)
 
     def agent_features(self) -> np.ndarray:
         game, n = self.game, self.aav
@@ -409,23 +452,22 @@ class DecisionView:
     def task_features(self) -> np.ndarray:
         """One row per visible task (``game.visible`` order), columns ``TASK_FEATURES``."""
         game, n = self.game, self.aav
-        instance = game.instance
         anchor = self.anchor
-        candidates = set(self.candidates)
-        rows = []
-        for m in game.visible:
-            task = instance.tasks[m]
-            members = game.plan.members[m]
-            own = members.get(n)
-            distance = game._dist[anchor.node][m]
-            slack = task.t_end - (anchor.time + distance / instance.aavs[n].speed)
-            rows.append((task.x / 1000, task.y / 1000, float(task.is_delivery), task.demand,
-                         self.residual(m), task.t_start / instance.horizon,
-                         task.t_end / instance.horizon, task.release / instance.horizon,
-                         len(members), game.plan.covered(m), float(own is not None),
-                         own.amount if own is not None else 0, distance / 1000,
-                         slack / instance.horizon, float(m in candidates)))
-        return np.array(rows, dtype=float).reshape(-1, len(TASK_FEATURES))
+        index = game.visible_index
+        fixed = game._task_columns
+        distance = game.instance.dist[anchor.node, game._visible_nodes]
+        slack = fixed[:, 7] - self.earliest_arrivals(game._visible_nodes)
+        members, on_time = game.plan.members, game.plan.on_time
+        coalition = np.array([(len(members[m]), on_time[m]) for m in game.visible],
+                             dtype=float).reshape(-1, 2)
+        member, own_amount, candidate = np.zeros((3, len(game.visible)))
+        for m, own in game.own_visits(n):
+            member[index[m]], own_amount[index[m]] = 1.0, own.amount
+        candidate[[index[m] for m in self.candidates]] = 1.0
+        return np.column_stack([fixed[:, :4], self.residuals(), fixed[:, 4:7], coalition,
+                                member, own_amount, distance / 1000,
+                                slack / game.instance.horizon, candidate]
+                               ).reshape(-1, len(TASK_FEATURES))
 
     def competition_features(self) -> np.ndarray:
         """One row per visible task (``game.visible`` order), ``COMPETITION_FEATURES``.
@@ -433,12 +475,12 @@ class DecisionView:
         distance, with no spare capacity, out of reach, at the deciding AAV's cost rate."""
         game, n = self.game, self.aav
         instance = game.instance
-        visible = np.asarray(game.visible, dtype=int)
+        visible = game._visible_nodes
         dist = instance.dist
         # The evaluator's rates (its q_n of Eq. 9 per metre, times w3): the cost rule stays
         # with its owner.
         rate = np.array(game.evaluator._op_per_metre) * game.evaluator.w3
-        anchors, near, spare = game.route_proximity()
+        near, spare = game.route_proximity()
         others = np.array([k for k in range(game.n_aavs) if k != n], dtype=int)
         own_detour = 2.0 * near[n] * rate[n]
         if len(others) == 0:
@@ -450,13 +492,7 @@ class DecisionView:
         near_others = near[others]
         nearest = others[near_others.argmin(axis=0)]
         spare_nearest = spare[nearest, np.arange(len(visible))]
-        from_anchor = dist[np.ix_([anchors[k].node for k in others], visible)]
-        times = np.array([anchors[k].time for k in others])[:, None]
-        speeds = np.array([instance.aavs[k].speed for k in others], dtype=float)[:, None]
-        reach_left = np.array([instance.aavs[k].max_range - anchors[k].flown
-                               for k in others])[:, None]
-        latest = np.array([game._latest_on_time[m] for m in visible])
-        reach = ((times + from_anchor / speeds <= latest) & (from_anchor <= reach_left))
+        reach = game.reachable[others]
         return np.column_stack([
             near_others.min(axis=0) / 1000, spare_nearest, reach.mean(axis=0),
             (2.0 * near_others * rate[others][:, None]).min(axis=0), own_detour,

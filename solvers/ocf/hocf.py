@@ -50,19 +50,21 @@ class HeuristicSelection:
         the nodes of its free route are gathered once for all of them."""
         game, n = view.game, view.aav
         instance = game.instance
+        if not tasks:
+            return {}
+        columns = np.asarray(tasks, dtype=int)
         nodes = [view.anchor.node, *(v.node for v in game.route(n)[game.first_free[n]:])]
-        nearest = instance.dist[np.ix_(nodes, tasks)].min(axis=0).tolist() if tasks else []
-        capacity = instance.aavs[n].capacity
-        scores = {}
-        for m, distance in zip(tasks, nearest, strict=True):
-            task = instance.tasks[m]
-            slack = task.t_end - view.earliest_arrival(m)
-            urgency = 1.0 - min(1.0, max(0.0, slack / instance.horizon))
-            proximity = 1.0 - distance / self.d_max
-            share = min(view.residual(m), capacity) / task.demand
-            scores[m] = (self.w_urgency * urgency + self.w_distance * proximity
-                         + self.w_residual * share)
-        return scores
+        nearest = instance.dist[np.ix_(nodes, columns)].min(axis=0)
+        arrival = view.earliest_arrivals(columns)
+        t_end, demand = np.array([(instance.tasks[m].t_end, instance.tasks[m].demand)
+                                  for m in tasks], dtype=float).T
+        residual = view.residuals()[[game.visible_index[m] for m in tasks]]
+        urgency = 1.0 - np.minimum(1.0, np.maximum(0.0, (t_end - arrival) / instance.horizon))
+        proximity = 1.0 - nearest / self.d_max
+        share = np.minimum(residual, instance.aavs[n].capacity) / demand
+        scores = (self.w_urgency * urgency + self.w_distance * proximity
+                  + self.w_residual * share)
+        return dict(zip(tasks, scores.tolist(), strict=True))
 
     def ineffective(self, view: DecisionView, m: int) -> bool:
         game, n = view.game, view.aav

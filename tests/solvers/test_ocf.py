@@ -218,9 +218,10 @@ def test_hocf_prefers_the_nearer_of_two_otherwise_equal_tasks():
     assert hocf.select(view, np.random.default_rng(0)) == 1
 
 
-def test_route_proximity_kept_across_moves_equals_one_computed_afresh():
-    """Rows of AAVs whose routes a move left alone are kept; the result must be what a
-    fresh game on the same structure computes."""
+def test_what_a_game_keeps_across_moves_equals_what_a_fresh_game_computes():
+    """Route proximity (rows of AAVs whose routes a move left alone are kept), the residuals
+    (kept per AAV and structure, on the plan's on-time sums kept by its moves) and the task
+    features built on them must be what a fresh game on the same structure computes."""
     state = PlanningState.static(generate("8/20", seed=4))
     game = CoalitionGame(state)
     hocf = HeuristicSelection(state.instance, 1.0, 2.0, 1.0)
@@ -228,11 +229,19 @@ def test_route_proximity_kept_across_moves_equals_one_computed_afresh():
 
     class Checking:
         def select(self, view, rng):
-            kept = game.route_proximity()
-            afresh = CoalitionGame(state, game.plan.routes).route_proximity()
-            assert kept[0] == afresh[0]
+            fresh = CoalitionGame(state, game.plan.routes)
+            # What the engine left for this decision first, then every AAV's.
+            np.testing.assert_array_equal(
+                view.task_features(),
+                DecisionView(fresh, view.aav, view.candidates).task_features())
+            assert game.valid_tasks(view.aav) == fresh.valid_tasks(view.aav)
+            kept, afresh = game.route_proximity(), fresh.route_proximity()
+            np.testing.assert_array_equal(kept[0], afresh[0])
             np.testing.assert_array_equal(kept[1], afresh[1])
-            np.testing.assert_array_equal(kept[2], afresh[2])
+            for n in range(game.n_aavs):
+                assert game.residuals(n).tolist() == [
+                    max(0, task.demand - fresh.plan.covered(m, exclude=n))
+                    for m, task in ((m, state.instance.tasks[m]) for m in game.visible)]
             checked.append(len(game.trajectory))
             return hocf.select(view, rng)
 
@@ -411,3 +420,24 @@ def test_a_rule_that_draws_meets_the_same_aav_orders_as_one_that_does_not():
     assert [(d.aav, d.task, d.accepted) for d in games[1].decisions] == [
         (d.aav, d.task, d.accepted) for d in games[0].decisions]
     assert games[1].cost == games[0].cost
+
+
+def test_residuals_follow_accepted_moves():
+    instance = residual_case()
+    d0, d1 = instance.depot_nodes
+    routes = ((Visit(d0), Visit(0, 10), Visit(d0)),
+              ((Visit(d1), Visit(1, 5), Visit(d1), Visit(0, 5), Visit(d1))), ())
+    game = CoalitionGame(PlanningState.static(instance), routes)
+    # Each AAV's own visit does not count for itself; A1's visit to T0 is late.
+    assert [game.residuals(n).tolist() for n in range(3)] == [[20, 0], [10, 5], [10, 0]]
+    assert game.decide(2, 0)  # A2 joins T0 with the 10 kg left for it, on time
+    assert game.plan.members[0][2].amount == 10
+    assert [game.residuals(n).tolist() for n in range(3)] == [[10, 0], [0, 5], [10, 0]]
+    # T0 covered twice over on time: A2 leaving it is accepted, and A0, asked last before
+    # that move, sees the 10 kg A2 brought missing again.
+    over = CoalitionGame(PlanningState.static(instance),
+                         ((Visit(d0), Visit(0, 20), Visit(d0)), (),
+                          (Visit(d0), Visit(0, 10), Visit(d0))))
+    assert over.residuals(0).tolist() == [10, 5]
+    assert over.decide(2, 0) and 2 not in over.plan.members[0]
+    assert over.residuals(0).tolist() == [20, 5]

@@ -419,6 +419,9 @@ class PlanState:
                 self.members[m][n] = c
         self.task_costs = [evaluator.task_cost(m, self.members[m].values()) for m in
                            range(n_tasks)]
+        # Eq. 19's sum per task, kept up to date by apply: the OCF games ask for it once per
+        # visible task per decision, and a plan changes far less often than that.
+        self._on_time = [self._on_time_sum(m) for m in range(n_tasks)]
 
     @property
     def routes(self) -> tuple[Route, ...]:
@@ -428,11 +431,21 @@ class PlanState:
     def cost(self) -> float:
         return math.fsum(c.total for c in self.task_costs)
 
+    @property
+    def on_time(self) -> Sequence[int]:
+        """``covered(m)`` of every task, by task index (read-only)."""
+        return self._on_time
+
     def covered(self, m: int, exclude: int | None = None) -> int:
         """On-time kilograms of task m delivered by AAVs other than ``exclude`` (Eq. 19)."""
+        own = self.members[m].get(exclude) if exclude is not None else None
+        if own is None or own.arrival > self.evaluator._latest_on_time[m]:
+            return self._on_time[m]
+        return self._on_time[m] - own.amount
+
+    def _on_time_sum(self, m: int) -> int:
         t_end = self.evaluator._latest_on_time[m]
-        return sum(c.amount for n, c in self.members[m].items()
-                   if n != exclude and c.arrival <= t_end)
+        return sum(c.amount for c in self.members[m].values() if c.arrival <= t_end)
 
     def propose(self, n: int, route: Sequence[Visit]) -> Proposal | None:
         """Price replacing AAV n's route; None when the new route is infeasible."""
@@ -464,6 +477,7 @@ class PlanState:
             self.members[m][n] = c
         for m, cost in proposal.task_costs.items():
             self.task_costs[m] = cost
+            self._on_time[m] = self._on_time_sum(m)
         self.traces[n] = proposal.trace
 
     def set_route(self, n: int, route: Sequence[Visit]) -> float:

@@ -114,13 +114,14 @@ class CoalitionGame:
         self.visible_index = {m: i for i, m in enumerate(self.visible)}
         self._visible_demand = np.array([instance.tasks[m].demand for m in self.visible],
                                         dtype=int)
-        # DecisionView.task_features' columns that depend on the task alone (and t_end, for
-        # the slack), once per game rather than once per decision.
-        horizon = instance.horizon
+        # DecisionView.task_features' columns that depend on the task alone, and the
+        # deadlines of its slack, once per game rather than once per decision.
+        horizon, tasks = instance.horizon, [instance.tasks[m] for m in self.visible]
         self._task_columns = np.array(
             [(t.x / 1000, t.y / 1000, float(t.is_delivery), t.demand, t.t_start / horizon,
-              t.t_end / horizon, t.release / horizon, t.t_end)
-             for t in (instance.tasks[m] for m in self.visible)], dtype=float).reshape(-1, 8)
+              t.t_end / horizon, t.release / horizon) for t in tasks],
+            dtype=float).reshape(-1, 7)
+        self._visible_t_end = np.array([t.t_end for t in tasks], dtype=float)
         self._dist = instance.dist_rows
         self._latest_on_time = [t.latest_on_time for t in instance.tasks]
         self._speed = [a.speed for a in instance.aavs]
@@ -456,7 +457,7 @@ class DecisionView:
         index = game.visible_index
         fixed = game._task_columns
         distance = game.instance.dist[anchor.node, game._visible_nodes]
-        slack = fixed[:, 7] - self.earliest_arrivals(game._visible_nodes)
+        slack = game._visible_t_end - self.earliest_arrivals(game._visible_nodes)
         members, on_time = game.plan.members, game.plan.on_time
         coalition = np.array([(len(members[m]), on_time[m]) for m in game.visible],
                              dtype=float).reshape(-1, 2)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from tsac_bench.model.generator import generate
 from tsac_bench.planning.solve import solve
+from tsac_bench.solvers.ocf.engine import C_MAX, INIT, K_MAX, SAMPLES
 
 SCALES = ("16/40", "32/80")
 #: (label, method, settings): the defaults, then the OCF games started from greedy's plan.
@@ -52,7 +53,10 @@ def main() -> None:
         f"{platform.python_version()}, pinned to one core. Generated instances (default "
         f"generator), seeds {seeds.start}..{seeds.stop - 1}; method seed 0. Wall time is one "
         "static plan call; J is the evaluator's. Dynamic: the simulator's run (t = 0 and the "
-        "generator's two release events), J of the executed routes.",
+        "generator's two release events), J of the executed routes. Budget of every OCF "
+        f"plan call: one game (samples {SAMPLES}), no time limit, k_max {K_MAX} decisions, "
+        f"c_max {C_MAX} consecutive rejections; each starts from the {INIT} structure "
+        "unless its label says init=greedy.",
         "",
     ]
     goals = []

@@ -111,17 +111,17 @@ class CoalitionGame:
         self.anchors = [state.anchor(n) for n in range(self.n_aavs)]
         self.visible = sorted(state.visible)
         self._visible_nodes = np.asarray(self.visible, dtype=int)
+        # Per visible task, in ``visible`` order: its position, demand and deadline, and the
+        # columns of DecisionView.task_features that depend on the task alone, once per game
+        # rather than once per decision.
         self.visible_index = {m: i for i, m in enumerate(self.visible)}
-        self._visible_demand = np.array([instance.tasks[m].demand for m in self.visible],
-                                        dtype=int)
-        # DecisionView.task_features' columns that depend on the task alone, and the
-        # deadlines of its slack, once per game rather than once per decision.
         horizon, tasks = instance.horizon, [instance.tasks[m] for m in self.visible]
+        self.visible_demand = np.array([t.demand for t in tasks], dtype=int)
+        self.visible_t_end = np.array([t.t_end for t in tasks], dtype=float)
         self._task_columns = np.array(
             [(t.x / 1000, t.y / 1000, float(t.is_delivery), t.demand, t.t_start / horizon,
               t.t_end / horizon, t.release / horizon) for t in tasks],
             dtype=float).reshape(-1, 7)
-        self._visible_t_end = np.array([t.t_end for t in tasks], dtype=float)
         self._dist = instance.dist_rows
         self._latest_on_time = [t.latest_on_time for t in instance.tasks]
         self._speed = [a.speed for a in instance.aavs]
@@ -178,10 +178,10 @@ class CoalitionGame:
             return self._residuals[1]
         on_time = self.plan.on_time
         covered = np.array([on_time[m] for m in self.visible], dtype=int)
-        for m, own in self.own_visits(n):
-            if own.arrival <= self._latest_on_time[m]:
-                covered[self.visible_index[m]] -= own.amount
-        residuals = np.maximum(0, self._visible_demand - covered)
+        # Only the tasks n serves differ from the plan's on-time sums.
+        for m, _ in self.own_visits(n):
+            covered[self.visible_index[m]] = self.plan.covered(m, exclude=n)
+        residuals = np.maximum(0, self.visible_demand - covered)
         residuals.flags.writeable = False  # shared by every caller until the next move
         self._residuals = (key, residuals)
         return residuals
@@ -457,7 +457,7 @@ class DecisionView:
         index = game.visible_index
         fixed = game._task_columns
         distance = game.instance.dist[anchor.node, game._visible_nodes]
-        slack = game._visible_t_end - self.earliest_arrivals(game._visible_nodes)
+        slack = game.visible_t_end - self.earliest_arrivals(game._visible_nodes)
         members, on_time = game.plan.members, game.plan.on_time
         coalition = np.array([(len(members[m]), on_time[m]) for m in game.visible],
                              dtype=float).reshape(-1, 2)

@@ -46,22 +46,20 @@ class HeuristicSelection:
         self.d_max = float(instance.dist.max()) or 1.0
 
     def priorities(self, view: DecisionView, tasks: Sequence[int]) -> dict[int, float]:
-        """The priority score of each of ``tasks`` for the deciding AAV (module docstring);
-        the nodes of its free route are gathered once for all of them."""
+        """The priority score of each of ``tasks`` (visible ones) for the deciding AAV (module
+        docstring), all at once."""
         game, n = view.game, view.aav
         instance = game.instance
         if not tasks:
             return {}
-        columns = np.asarray(tasks, dtype=int)
-        nodes = [view.anchor.node, *(v.node for v in game.route(n)[game.first_free[n]:])]
-        nearest = instance.dist[np.ix_(nodes, columns)].min(axis=0)
-        arrival = view.earliest_arrivals(columns)
-        t_end, demand = np.array([(instance.tasks[m].t_end, instance.tasks[m].demand)
-                                  for m in tasks], dtype=float).T
-        residual = view.residuals()[[game.visible_index[m] for m in tasks]]
-        urgency = 1.0 - np.minimum(1.0, np.maximum(0.0, (t_end - arrival) / instance.horizon))
-        proximity = 1.0 - nearest / self.d_max
-        share = np.minimum(residual, instance.aavs[n].capacity) / demand
+        at = [game.visible_index[m] for m in tasks]
+        arrival = view.earliest_arrivals(np.asarray(tasks, dtype=int))
+        urgency = 1.0 - np.minimum(1.0, np.maximum(
+            0.0, (game.visible_t_end[at] - arrival) / instance.horizon))
+        nearest, _ = game.route_proximity()
+        proximity = 1.0 - nearest[n, at] / self.d_max
+        share = (np.minimum(view.residuals()[at], instance.aavs[n].capacity)
+                 / game.visible_demand[at])
         scores = (self.w_urgency * urgency + self.w_distance * proximity
                   + self.w_residual * share)
         return dict(zip(tasks, scores.tolist(), strict=True))

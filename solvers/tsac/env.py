@@ -174,13 +174,10 @@ def observe(view: DecisionView, features: FeatureSet = FEATURE_SETS[1]) -> Obser
     demand = tasks_raw[:, column["demand"]]
     capacity = game.instance.aavs[n].capacity
     coverable = np.minimum(tasks_raw[:, column["residual"]], capacity) / demand
-    visible = np.asarray(game.visible, dtype=int)
-    free_route = [view.anchor.node, *(v.node for v in game.route(n)[game.first_free[n]:])]
-    route_distance = game.instance.dist[np.ix_(free_route, visible)].min(axis=0) / 10_000.0
-    own = game.plan.members
-    t_end = [game.instance.tasks[m].latest_on_time for m in game.visible]
-    own_late = np.array([n in own[m] and own[m][n].arrival > t_end[i]
-                         for i, m in enumerate(game.visible)], dtype=float)
+    route_distance = game.route_proximity()[0][n] / 10_000.0
+    own_late = np.zeros(len(game.visible))
+    for m, own in game.own_visits(n):
+        own_late[game.visible_index[m]] = own.arrival > game.instance.tasks[m].latest_on_time
     columns = [tasks, relative, coverable[:, None], route_distance[:, None], own_late[:, None]]
     if features.competition:
         columns.append(view.competition_features() / _COMPETITION_DIVISOR)
@@ -188,9 +185,8 @@ def observe(view: DecisionView, features: FeatureSet = FEATURE_SETS[1]) -> Obser
         columns.append(teacher_features(view))
     tasks = np.concatenate(columns, axis=1).astype(np.float32)
     depots = (view.depot_features() / _DEPOT_DIVISOR).astype(np.float32)
-    index = {m: i + features.offset for i, m in enumerate(game.visible)}
     action_mask = np.zeros(features.offset + len(game.visible), dtype=bool)
-    action_mask[[index[m] for m in view.candidates]] = True
+    action_mask[features.offset:] = tasks_raw[:, column["candidate"]] > 0
     pass_token = None
     if features.pass_action:
         # Passing is offered only with a candidate to pass over (a terminal state has none).

@@ -2,6 +2,18 @@
 
     python benchmarks/paper_reproduction.py run   [--per-scale 20] [--jobs 2]
     python benchmarks/paper_reproduction.py write
+    python benchmarks/paper_reproduction.py run-budgets [--static-per-scale 30] [--knee S]
+    python benchmarks/paper_reproduction.py write-budgets
+
+``run-budgets`` is the reproduction at equal budgets (docs/reports.md, "Budgets"): every
+heuristic and learned method with the same seconds per plan call (``BUDGETS``), static on the
+first ``--static-per-scale`` instances per scale (3 seeds of each anytime method, one of each
+one-pass method), in chunks of ``--chunk`` instances per scale so that an interrupted sweep
+leaves whole sweeps on the first instances; with ``--knee S``, dynamic on the first
+``--dynamic-per-scale`` instances at S seconds per plan call, the OCF methods from the
+committed prefixes alone and from the plan in force (``init=incumbent``). It is resumable
+like ``run``, into ``results/paper-reproduction-budgets/``; ``write-budgets`` writes its report
+to ``reports/paper-reproduction/budgets/``.
 
 ``run`` runs every method on the first ``--per-scale`` instances (by seed) of each scale of
 ``instances/paper-mc/`` in static and dynamic mode, and the exact methods (static: J* is an
@@ -39,6 +51,13 @@ SCALES = ("4/10", "8/20", "16/40", "32/80")
 PAPER_METHODS = ("tsac-ocf", "hocf", "rocf", "dga", "cnp")
 OUR_METHODS = ("greedy", "pyvrp")
 EXACT_METHODS = ("exact", "exact-cpsat", "exact-bp")
+#: Seconds per plan call of the equal-budget sweep, and its seeds of an anytime method.
+BUDGETS = (0.1, 0.3, 1.0, 3.0)
+BUDGET_SEEDS = 3
+BUDGET_OUT = ROOT / "results" / "paper-reproduction-budgets"
+BUDGET_REPORT = REPORT / "budgets"
+#: The OCF methods, run in dynamic mode from the plan in force as well as empty.
+OCF_METHODS = ("hocf", "rocf", "tsac-ocf")
 #: The exact method whose lower bound brackets the gaps where no method proves J* (8/20 up).
 BOUND_METHOD = "exact-bp"
 
@@ -82,6 +101,35 @@ def run(args: argparse.Namespace) -> None:
         larger = [f for scale in SCALES[1:] for f in instance_files(scale, args.bound_per_scale)]
         run_batch(RunConfig(larger, OUT, methods=[BOUND_METHOD], mode="static",
                             time_limit=args.bound_time_limit, **common))
+
+
+def run_budgets(args: argparse.Namespace) -> None:
+    from tsac_bench.planning import allocator_class, available_methods
+    from tsac_bench.planning.budget import ANYTIME, budget_use
+
+    present = set(available_methods())
+    heuristics = [m for m in (*PAPER_METHODS, *OUR_METHODS) if m in present]
+    anytime = [m for m in heuristics if budget_use(allocator_class(m)) == ANYTIME]
+    one_pass = [m for m in heuristics if m not in anytime]
+    common = {"jobs": args.jobs, "executor": args.executor, "scheduler": args.scheduler,
+              "budgets": list(BUDGETS)}
+    for first in range(0, args.static_per_scale, args.chunk):
+        last = min(first + args.chunk, args.static_per_scale)
+        files = [f for scale in SCALES for f in instance_files(scale, last)[first:]]
+        run_batch(RunConfig(files, BUDGET_OUT, methods=anytime, mode="static",
+                            seeds=BUDGET_SEEDS, **common))
+        run_batch(RunConfig(files, BUDGET_OUT, methods=one_pass, mode="static", **common))
+    if args.knee is None:
+        return
+    warm = [f"{m}:init=incumbent" for m in OCF_METHODS if m in present]
+    files = [f for scale in SCALES for f in instance_files(scale, args.dynamic_per_scale)]
+    run_batch(RunConfig(files, BUDGET_OUT, methods=[*heuristics, *warm], mode="dynamic",
+                        **{**common, "budgets": [args.knee]}))
+
+
+def write_budgets(args: argparse.Namespace) -> None:
+    del args
+    print(write_report(BUDGET_OUT, BUDGET_REPORT))
 
 
 def relative(numerator: float, denominator: float) -> str:
@@ -281,8 +329,17 @@ def write(args: argparse.Namespace) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("command", choices=["run", "write"])
+    parser.add_argument("command", choices=["run", "write", "run-budgets", "write-budgets"])
     parser.add_argument("--per-scale", type=int, default=20)
+    parser.add_argument("--static-per-scale", type=int, default=30,
+                        help="run-budgets: instances per scale of the static sweep")
+    parser.add_argument("--chunk", type=int, default=10,
+                        help="run-budgets: instances per scale run together")
+    parser.add_argument("--knee", type=float, default=None,
+                        help="run-budgets: seconds per plan call of the dynamic runs (none: "
+                             "no dynamic runs)")
+    parser.add_argument("--dynamic-per-scale", type=int, default=100,
+                        help="run-budgets: instances per scale of the dynamic runs")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--exact-time-limit", type=float, default=60.0)
     parser.add_argument("--bp-time-limit", type=float, default=None,
@@ -297,7 +354,8 @@ def main() -> None:
     parser.add_argument("--executor", default="local", choices=["local", "dask"])
     parser.add_argument("--scheduler", default=None)
     args = parser.parse_args()
-    {"run": run, "write": write}[args.command](args)
+    {"run": run, "write": write, "run-budgets": run_budgets,
+     "write-budgets": write_budgets}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 
 from tsac_bench.model import Route
 from tsac_bench.model.evaluator import (
@@ -34,6 +35,7 @@ from tsac_bench.model.evaluator import (
     RouteTrace,
 )
 from tsac_bench.planning import Options, PlanningState, PlanResult, Settings, declare
+from tsac_bench.planning.budget import ONE_PASS
 from tsac_bench.planning.insertion import best_insertion
 
 #: A bid must lower J by more than float noise to count.
@@ -150,6 +152,7 @@ class ContractNetManager:
 
 class ContractNetAllocator(Settings):
     name = "cnp"
+    budget_use: ClassVar[str] = ONE_PASS
     setting_constraints = declare(commitment=Options(*COMMITMENTS))
 
     def __init__(self, commitment: str = "arrival") -> None:

@@ -30,17 +30,25 @@ Selection is a tournament of ``tournament`` individuals; the ``elite`` best surv
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import Any
+from types import MappingProxyType
+from typing import Any, ClassVar
 
 import numpy as np
 
 from tsac_bench.model import Route, Visit
 from tsac_bench.model.evaluator import PlanState
-from tsac_bench.planning import Interval, PlanningState, PlanResult, Settings, declare
+from tsac_bench.planning import (
+    Interval,
+    NoneOr,
+    PlanningState,
+    PlanResult,
+    Settings,
+    declare,
+)
+from tsac_bench.planning.budget import ANYTIME, IncumbentTrace, WorkStop, require_a_stop
 from tsac_bench.planning.insertion import best_insertion, removal_route
 
 #: A change must lower J by more than float noise to count as an improvement.
@@ -220,37 +228,51 @@ class Problem:
         self.repair(plan, rng)
         return self.individual(plan)
 
-    def initial_population(self, size: int, rng: np.random.Generator,
-                           deadline: float | None) -> list[Individual]:
+    def initial_population(self, size: int, rng: np.random.Generator, stop: WorkStop,
+                           trace: IncumbentTrace) -> list[Individual]:
+        """Up to ``size`` individuals (fewer if ``stop`` is reached; the call's first
+        individual is always built)."""
         population: list[Individual] = []
         while len(population) < size:
-            if population and deadline is not None and time.monotonic() > deadline:
+            if stop.work and stop.reached() is not None:
                 break
             if self.warm is not None and len(population) < (size + 1) // 2:
                 plan = self.plan_of(self.warm)
                 if population:
                     self.mutations[int(rng.integers(len(self.mutations)))](plan, rng)
                 self.repair(plan, rng)
-                population.append(self.individual(plan))
+                individual = self.individual(plan)
             else:
-                population.append(self.construct(self.base, rng))
+                individual = self.construct(self.base, rng)
+            population.append(individual)
+            stop.done()
+            trace.offer(individual.J)
         return population
 
     def evolve(self, population: list[Individual] | None, size: int,
-               rng: np.random.Generator, generations: int,
-               deadline: float | None) -> tuple[list[Individual], list[float]]:
-        """Run ``generations`` generations (fewer if ``deadline`` passes). Returns the new
-        population and its best J before the first and after every generation run."""
+               rng: np.random.Generator, generations: int, stop: WorkStop,
+               trace: IncumbentTrace) -> tuple[list[Individual], list[float]]:
+        """Run ``generations`` generations (fewer if ``stop`` is reached, which is checked
+        before each individual: one individual, one unit of work). Returns the new population
+        and its best J before the first and after every generation begun."""
         if population is None:
-            population = self.initial_population(size, rng, deadline)
+            population = self.initial_population(size, rng, stop, trace)
+        if not population:
+            return population, []
         history = [min(ind.J for ind in population)]
         for _ in range(generations):
-            if deadline is not None and time.monotonic() > deadline:
+            if stop.reached() is not None:
                 break
             ranked = sorted(population, key=lambda ind: ind.J)
             survivors = ranked[:self.elite]
-            population = survivors + [self.offspring(ranked, rng)
-                                      for _ in range(size - len(survivors))]
+            children: list[Individual] = []
+            while len(survivors) + len(children) < size and stop.reached() is None:
+                children.append(self.offspring(ranked, rng))
+                stop.done()
+                trace.offer(children[-1].J)
+            complete = len(survivors) + len(children) == size
+            # A generation cut short ends the call: only its best matters then.
+            population = survivors + children if complete else ranked + children
             history.append(min(ind.J for ind in population))
         return population, history
 
@@ -265,19 +287,34 @@ def _start_worker(state: PlanningState, settings: dict[str, Any]) -> None:
 
 
 def _evolve_in_worker(population: list[Individual] | None, size: int,
-                      rng: np.random.Generator, generations: int, deadline: float | None,
-                      ) -> tuple[list[Individual], list[float], np.random.Generator]:
+                      rng: np.random.Generator, generations: int, stop: WorkStop,
+                      ) -> tuple[list[Individual], list[float], np.random.Generator, int,
+                                 list[list[float]]]:
+    """``Problem.evolve`` in a worker: also returns the work it did and its trace (the
+    caller's stop and trace stay in the caller's process)."""
     assert _worker_problem is not None
-    population, history = _worker_problem.evolve(population, size, rng, generations, deadline)
-    return population, history, rng
+    before = stop.work
+    trace = IncumbentTrace(stop.began)
+    population, history = _worker_problem.evolve(population, size, rng, generations, stop,
+                                                  trace)
+    return population, history, rng, stop.work - before, trace.points
 
 
 class DGAAllocator(Settings):
+    """Settings as the module docstring says; ``generations`` (None: no cap) and
+    ``evaluations`` (the most individuals built in a plan call, the initial ones included,
+    over all islands; None: no cap) bound the work. An anytime method
+    (``tsac_bench.planning.budget``): under a budget it evolves until the budget is spent,
+    checked before each individual, and ``evaluations`` set to a budgeted call's work count
+    gives the same plan without the budget (with ``workers=0``: islands that run side by
+    side in worker processes do not split their work the same way twice)."""
+
     name = "dga"
     setting_constraints = declare(
         islands=Interval(int, 1, None),
         population=Interval(int, 1, None),
-        generations=Interval(int, 0, None),
+        generations=NoneOr(Interval(int, 0, None)),
+        evaluations=NoneOr(Interval(int, 1, None)),
         migration_interval=Interval(int, 1, None),
         # Elites and migrants are drawn from one island's population, never all of it.
         migrants=Interval(int, 0, "population", closed="left"),
@@ -288,14 +325,20 @@ class DGAAllocator(Settings):
         candidates=Interval(int, 1, None),
         workers=Interval(int, 0, None),
     )
+    budget_use: ClassVar[str] = ANYTIME
+    unbounded_settings: ClassVar[Mapping[str, Any]] = MappingProxyType({"generations": None})
+    work_setting: ClassVar[str] = "evaluations"
+    work_unit: ClassVar[str] = "individuals"
 
-    def __init__(self, islands: int = 2, population: int = 8, generations: int = 25,
-                 migration_interval: int = 5, migrants: int = 1, crossover_rate: float = 0.9,
-                 mutation_rate: float = 0.5, tournament: int = 2, elite: int = 1,
-                 candidates: int = 6, workers: int = 0) -> None:
+    def __init__(self, islands: int = 2, population: int = 8, generations: int | None = 25,
+                 evaluations: int | None = None, migration_interval: int = 5,
+                 migrants: int = 1, crossover_rate: float = 0.9, mutation_rate: float = 0.5,
+                 tournament: int = 2, elite: int = 1, candidates: int = 6,
+                 workers: int = 0) -> None:
         self.islands = islands
         self.population = population
         self.generations = generations
+        self.evaluations = evaluations
         self.migration_interval = migration_interval
         self.migrants = migrants
         self.crossover_rate = crossover_rate
@@ -312,60 +355,74 @@ class DGAAllocator(Settings):
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
-        deadline = None if time_limit is None else time.monotonic() + time_limit
+        require_a_stop(self.name, "generations", time_limit, self.generations,
+                       self.evaluations)
+        stop = WorkStop(time_limit, self.evaluations)
+        trace = IncumbentTrace(stop.began)
         rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(self.islands)]
         populations: list[list[Individual] | None] = [None] * self.islands
         if self.workers:
             with ProcessPoolExecutor(min(self.workers, self.islands), initializer=_start_worker,
                                      initargs=(state, self._problem_settings())) as pool:
-                history, done, stop = self._run(
-                    populations, rngs, deadline,
-                    lambda jobs: list(pool.map(_evolve_in_worker, *zip(*jobs, strict=True))))
+
+                def evolve_in_pool(jobs: list[tuple]) -> list[tuple]:
+                    results = []
+                    for population, history, rng, work, points in pool.map(
+                            _evolve_in_worker, *zip(*jobs, strict=True)):
+                        stop.done(work)
+                        for seconds, cost in points:
+                            trace.offer(cost, stop.began + seconds)
+                        results.append((population, history, rng))
+                    return results
+
+                history, done, ended = self._run(populations, rngs, stop, evolve_in_pool)
         else:
             problem = Problem(state, **self._problem_settings())
 
-            def evolve_here(population, size, rng, generations, until):
+            def evolve_here(population, size, rng, generations, stop):
                 population, island_history = problem.evolve(population, size, rng,
-                                                            generations, until)
+                                                            generations, stop, trace)
                 return population, island_history, rng
 
-            history, done, stop = self._run(populations, rngs, deadline,
-                                            lambda jobs: [evolve_here(*job) for job in jobs])
+            history, done, ended = self._run(populations, rngs, stop,
+                                             lambda jobs: [evolve_here(*job) for job in jobs])
         best = min((ind for population in populations if population for ind in population),
                    key=lambda ind: ind.J)
-        return PlanResult(best.routes, {"stop": stop, "generations": done,
-                                        "best_J_per_generation": history})
+        return PlanResult(best.routes, {"stop": ended, "generations": done,
+                                        "best_J_per_generation": history, "work": stop.work,
+                                        "trace": trace.points, "seconds": stop.elapsed()})
 
     def _run(self, populations: list[list[Individual] | None],
-             rngs: list[np.random.Generator], deadline: float | None,
+             rngs: list[np.random.Generator], stop: WorkStop,
              evolve_islands: Callable[[list[tuple]], list[tuple]],
              ) -> tuple[list[float], int, str]:
         """Evolve all islands epoch by epoch (``migration_interval`` generations), migrating
         between epochs. Fills ``populations`` in place; returns the best J before the first
         and after every generation, the generations run and why it stopped."""
         history: list[float] = []
-        done, stop = 0, "generations"
+        done = 0
         while True:
-            epoch = min(self.migration_interval, self.generations - done)
-            results = evolve_islands([(populations[i], self.population, rngs[i], epoch, deadline)
+            epoch = (self.migration_interval if self.generations is None
+                     else min(self.migration_interval, self.generations - done))
+            results = evolve_islands([(populations[i], self.population, rngs[i], epoch, stop)
                                       for i in range(self.islands)])
             histories = []
             for i, (population, island_history, rng) in enumerate(results):
                 populations[i], rngs[i] = population, rng
-                histories.append(island_history)
+                if island_history:
+                    histories.append(island_history)
             ran = max(len(h) for h in histories) - 1
-            # An island that hit the deadline early keeps its last best for later generations.
+            # An island stopped early keeps its last best for later generations.
             start = 0 if not history else 1
             history += [min(h[min(g, len(h) - 1)] for h in histories)
                         for g in range(start, ran + 1)]
             done += ran
-            if ran < epoch:
-                stop = "time-limit"
-                break
-            if done >= self.generations:
-                break
+            reason = stop.reached()
+            if reason is not None:
+                return history, done, reason
+            if self.generations is not None and done >= self.generations:
+                return history, done, "generations"
             self._migrate(populations)
-        return history, done, stop
 
     def _migrate(self, populations: list[list[Individual] | None]) -> None:
         """Ring migration: copies of each island's best replace the next island's worst."""

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import fields
-from typing import Any
+from typing import Any, ClassVar
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.model.evaluator import CostEvaluator, costs_agree
@@ -34,6 +34,7 @@ from tsac_bench.planning import (
     Settings,
     declare,
 )
+from tsac_bench.planning.budget import TIME_LIMIT
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 
@@ -51,6 +52,7 @@ class ExactAllocator(Settings):
 
     name = "exact"
     proves_optimality = True
+    budget_use: ClassVar[str] = TIME_LIMIT
     setting_constraints = declare(
         time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
         threads=Interval(int, 1, None),
@@ -118,6 +120,7 @@ class CpSatAllocator(Settings):
 
     name = "exact-cpsat"
     proves_optimality = True
+    budget_use: ClassVar[str] = TIME_LIMIT
     modes = ("static",)
     setting_constraints = declare(
         time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
@@ -163,6 +166,7 @@ class BranchPriceAllocator(Settings):
 
     name = "exact-bp"
     proves_optimality = True
+    budget_use: ClassVar[str] = TIME_LIMIT
     setting_constraints = declare(
         time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
         incumbent=Options("dga", "greedy"),

@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
+from typing import ClassVar
 
 from tsac_bench.model.evaluator import PlanState
 from tsac_bench.planning import PlanningState, PlanResult, Settings, declare
+from tsac_bench.planning.budget import ONE_PASS
 from tsac_bench.planning.insertion import best_insertion
 
 
@@ -49,6 +51,7 @@ def deadline_order(state: PlanningState) -> list[int]:
 
 class GreedyAllocator(Settings):
     name = "greedy"
+    budget_use: ClassVar[str] = ONE_PASS
     setting_constraints = declare()
 
     def __init__(self) -> None:

@@ -22,31 +22,52 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Mapping
 from importlib.metadata import version
+from types import MappingProxyType
+from typing import Any, ClassVar
 
 import pyvrp
 
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.model.evaluator import CostEvaluator, departure_and_arrival
 from tsac_bench.planning import Interval, NoneOr, PlanningState, PlanResult, Settings, declare
+from tsac_bench.planning.budget import ANYTIME, require_a_stop
 from tsac_bench.planning.insertion import removal_route, top_up
 from tsac_bench.solvers.greedy import deadline_order, insert_cheapest
 
+#: The share of a plan call's time limit that PyVRP's search may use; the rest is for
+#: building its model and decoding and completing its solution (at 32/80 both together take
+#: up to a few tenths of a second).
+SEARCH_SHARE = 0.8
 #: PyVRP works in integers: seconds * TIME_SCALE and cost * COST_SCALE.
 TIME_SCALE = 100
 COST_SCALE = 1_000_000
 
 
 class PyVRPAllocator(Settings):
+    """Settings: ``max_iterations`` (None: no cap) and ``time_limit`` (seconds, None: no
+    cap) end PyVRP's search, whichever comes first, ``SEARCH_SHARE`` of the time left for
+    the search and the rest for decoding; ``piece_size`` and ``duration_weight`` shape the
+    model (module docstring). An anytime method (``tsac_bench.planning.budget``): under a
+    budget only the budget ends the search, and ``max_iterations`` set to a budgeted call's
+    iteration count gives the same plan without it. PyVRP hands back its best solution at
+    the end only, so the incumbent trace has one point."""
+
     name = "pyvrp"
     setting_constraints = declare(
-        max_iterations=Interval(int, 1, None),
-        time_limit=Interval(float, 0, None, closed="neither"),
+        max_iterations=NoneOr(Interval(int, 1, None)),
+        time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
         piece_size=NoneOr(Interval(int, 1, None)),
         duration_weight=Interval(float, 0, None),
     )
+    budget_use: ClassVar[str] = ANYTIME
+    unbounded_settings: ClassVar[Mapping[str, Any]] = MappingProxyType(
+        {"max_iterations": None, "time_limit": None})
+    work_setting: ClassVar[str] = "max_iterations"
+    work_unit: ClassVar[str] = "iterations"
 
-    def __init__(self, max_iterations: int = 1000, time_limit: float = 10.0,
+    def __init__(self, max_iterations: int | None = 1000, time_limit: float | None = 10.0,
                  piece_size: int | None = None, duration_weight: float = 10.0) -> None:
         self.max_iterations = max_iterations
         self.time_limit = time_limit
@@ -57,18 +78,24 @@ class PyVRPAllocator(Settings):
              time_limit: float | None = None) -> PlanResult:
         from pyvrp.stop import MaxIterations, MaxRuntime, MultipleCriteria
 
-        budget = self.time_limit if time_limit is None else min(self.time_limit, time_limit)
+        limits = [t for t in (self.time_limit, time_limit) if t is not None]
+        budget = min(limits) if limits else None
+        require_a_stop(self.name, "max_iterations", budget, self.max_iterations)
         began = time.perf_counter()
         mapping = _Mapping(state, self.piece_size, self.duration_weight)
-        # Iterations, not seconds, end a normal search so that a seed fixes the result; the
-        # time limit is only a cap (a run that hits it says so in its stats).
-        stop = MultipleCriteria([MaxIterations(self.max_iterations),
-                                 MaxRuntime(max(budget * 0.8, 0.01))])
+        # Iterations, not seconds, end a search without a budget so that a seed fixes the
+        # result; under a budget the iteration count it reached reproduces it.
+        criteria = []
+        if self.max_iterations is not None:
+            criteria.append(MaxIterations(self.max_iterations))
+        if budget is not None:
+            left = SEARCH_SHARE * budget - (time.perf_counter() - began)
+            criteria.append(MaxRuntime(max(left, 0.01)))
         # Prizes reach w1 * COST_SCALE; PyVRP's default penalty cap (1e5 per unit of excess
         # load) would then make overloading pay, so the cap is lifted well above any prize.
         params = pyvrp.SolveParams(penalty=pyvrp.PenaltyParams(max_penalty=1e12))
-        result = pyvrp.solve(mapping.problem_data(), stop, seed=seed, display=False,
-                             params=params)
+        result = pyvrp.solve(mapping.problem_data(), MultipleCriteria(criteria), seed=seed,
+                             display=False, params=params, collect_stats=False)
         evaluator = state.evaluator()
         decoded = tuple(_repair(state, evaluator, n, route)
                         for n, route in enumerate(mapping.decode(result.best)))
@@ -79,13 +106,17 @@ class PyVRPAllocator(Settings):
         # A visit that kept only its first piece may carry more: top it up, then insert.
         top_up(plan, [state.first_free(n) for n in range(state.instance.n_aavs)])
         insertions, _ = insert_cheapest(plan, state, deadline_order(state))
+        seconds = time.perf_counter() - began
+        stopped_by_count = (self.max_iterations is not None
+                            and result.num_iterations >= self.max_iterations)
         return PlanResult(plan.routes, {
             "solver": "pyvrp", "solver_version": version("pyvrp"),
             "pyvrp_cost": result.cost(), "pyvrp_feasible": result.is_feasible(),
             "pieces": len(mapping.pieces), "iterations": result.num_iterations,
-            "stop": "iterations" if result.num_iterations >= self.max_iterations else "time-limit",
+            "stop": "iterations" if stopped_by_count else "time-limit",
             "decoded_cost": decoded_cost, "completion_insertions": insertions,
-            "wall_time": time.perf_counter() - began,
+            "wall_time": seconds, "work": result.num_iterations,
+            "trace": [[seconds, plan.cost]],
         })
 
 

@@ -147,6 +147,9 @@ def solve(
     = "greedy",
     seed: Annotated[int, typer.Option()] = 0,
     time_limit: Annotated[float | None, typer.Option(help="seconds")] = None,
+    budget: Annotated[float | None, typer.Option(
+        help="seconds per plan call that the method spends (an anytime method until the "
+        "budget is spent; not with --time-limit)")] = None,
     mode: Annotated[str, typer.Option(help="static (every task known at t=0) or dynamic "
                                       "(re-plan at each release time)")] = "static",
     out: Annotated[Path | None, typer.Option(help="write the solution JSON here")] = None,
@@ -160,7 +163,7 @@ def solve(
 ) -> None:
     """Run one method on one instance and print J (dynamic: also J after each re-plan).
 
-    --time-limit is the budget of each plan call."""
+    --time-limit caps each plan call; --budget is what each plan call spends."""
     from tsac_bench.model.io import read_instance, write_solution
     from tsac_bench.planning import parse_method_spec, resolve_spec
     from tsac_bench.planning.settings import parse_setting_pairs
@@ -169,7 +172,8 @@ def solve(
     spec = resolve_spec(parse_method_spec(method).with_settings(
         parse_setting_pairs(setting or [], "--set")))
     instance = read_instance(instance_path)
-    outcome = run_solve(instance, spec, seed=seed, time_limit=time_limit, mode=mode)
+    outcome = run_solve(instance, spec, seed=seed, time_limit=time_limit, mode=mode,
+                        budget=budget)
     solution = outcome.solution
     if mode == "dynamic":
         table = Table("t (s)", "released", "visible", "committed", "J known before",
@@ -182,6 +186,8 @@ def solve(
         console.print(table)
     console.print(f"{instance.name}  {spec.label}  {mode}  J = {outcome.cost:.6f}  "
                   f"({outcome.wall_time:.3f} s)")
+    if budget is not None:
+        console.print(_budget_line(outcome))
     if polish:
         from tsac_bench.planning.polish import polish as polish_solution
 
@@ -189,6 +195,57 @@ def solve(
         console.print(f"{instance.name}  {spec.label}+polish  J = {solution.cost:.6f}")
     if out is not None:
         write_solution(solution, instance, out)
+
+
+def _budget_line(outcome: Any) -> str:
+    """A budgeted solve's use of its budget: the plan calls over it and the work done (the
+    count that, as the method's work setting, reproduces the plan without the budget)."""
+    calls = outcome.stats.get("replans", [{"stats": outcome.stats}])
+    work = [r["stats"].get("work") for r in calls]
+    done = ("work " + " ".join("-" if w is None else str(w) for w in work)
+            if any(w is not None for w in work) else "no work count (not an anytime method)")
+    return (f"budget {outcome.budget:g} s per plan call: {outcome.over_budget} of "
+            f"{len(outcome.plan_seconds)} plan call(s) over it; {done}")
+
+
+def parse_budgets(text: str) -> list[float]:
+    """``--budget 0.1,1,10``: seconds per plan call, each > 0; one line naming the value
+    otherwise."""
+    from tsac_bench.planning.budget import check_budget
+
+    budgets = []
+    for word in text.split(","):
+        try:
+            value = float(word)
+        except ValueError:
+            raise TsacBenchError(f"--budget: {word.strip()!r} is not a number of seconds "
+                                 "(e.g. --budget 0.1,1,10)") from None
+        budgets.append(check_budget(value))
+    return sorted(set(budgets))
+
+
+@app.command()
+@user_errors
+def calibrate(
+    out: Annotated[Path | None, typer.Option(help="a run directory whose results store "
+                                             "records the calibration")] = None,
+) -> None:
+    """Time the machine-speed reference workload (budgets in reference units)."""
+    from tsac_bench.batch.calibrate import WORKLOAD
+    from tsac_bench.batch.calibrate import calibrate as run_calibration
+
+    if out is not None:
+        from tsac_bench.batch.runner import record_calibration
+        from tsac_bench.batch.store import ResultStore
+
+        with ResultStore(out) as store:
+            record_calibration(store, say_error)
+        return
+    calibration = run_calibration()
+    console.print(f"reference workload: {WORKLOAD}")
+    console.print(f"{calibration['seconds']:.4f} s on {calibration['host']} (median of "
+                  f"{len(calibration['repeats'])}): a budget of 1 s is "
+                  f"{1 / calibration['seconds']:.1f} reference units")
 
 
 @app.command()
@@ -276,6 +333,11 @@ def run(
                                                      "dynamic job plans once per event too); "
                                                      "default per 10 tasks: exact methods 10, "
                                                      "others 2")] = None,
+    budget: Annotated[str | None, typer.Option(
+        help="seconds per plan call that every method spends, comma-separated for a sweep "
+        "(e.g. 0.1,1,10): one job per budget, an anytime method runs until its budget is "
+        "spent; the run is calibrated first (tsac-bench calibrate). Not with --time-limit")]
+    = None,
     jobs: Annotated[int | None, typer.Option(min=1, help="parallel jobs (default: CPU "
                                              "count)")] = None,
     grace: Annotated[float, typer.Option(help="seconds a job may overrun 1.5 x its time limit "
@@ -299,6 +361,7 @@ def run(
 
     config = RunConfig(
         paths=list(paths), out=out, seeds=seeds, time_limit=time_limit, mode=mode,
+        budgets=None if budget is None else parse_budgets(budget),
         methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
         jobs=jobs or os.cpu_count() or 1, executor=executor, scheduler=scheduler,
         retry_failed=retry_failed, grace=grace)

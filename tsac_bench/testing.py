@@ -20,6 +20,7 @@ tsac-bench is needed.
 
 from __future__ import annotations
 
+import itertools
 import tempfile
 import unittest
 from collections.abc import Callable, Mapping
@@ -32,6 +33,7 @@ from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import AAV_TYPES, generate
 from tsac_bench.model.io import read_solution, write_solution
 from tsac_bench.planning import ALL_MODES, Allocator, MethodUnavailable, supported_modes
+from tsac_bench.planning.budget import ANYTIME, ONE_PASS, budget_use
 from tsac_bench.planning.registry import allocator_class, make_allocator
 from tsac_bench.planning.settings import check_settings, constructor_keywords
 from tsac_bench.planning.solve import SolveOutcome, solve
@@ -43,6 +45,8 @@ __all__ = ["DEPOTS", "FLEET", "Check", "CheckSkipped", "aav", "allocator_checks"
 TIME_LIMIT = 2.0
 #: A plan call may overrun its budget by this factor plus this many seconds (imports, setup).
 BUDGET_FACTOR, BUDGET_SLACK = 2.0, 3.0
+#: The budget of the anytime checks: a few games or generations on a 4/10 instance.
+ANYTIME_BUDGET = 0.3
 
 
 class CheckSkipped(unittest.SkipTest):
@@ -137,11 +141,15 @@ def _declared_modes(method: str | Allocator) -> tuple[str, ...]:
 
 
 def _run(method: str | Allocator, instance: Instance, mode: str, *, seed: int = 0,
-         time_limit: float = TIME_LIMIT) -> SolveOutcome:
+         time_limit: float | None = TIME_LIMIT, budget: float | None = None,
+         settings: Mapping[str, object] | None = None) -> SolveOutcome:
     """``solve`` plus what any reader of the solution would check again from the routes."""
     if mode not in _declared_modes(method):
         raise CheckSkipped(f"{_method_name(method)} declares modes {_declared_modes(method)}")
-    outcome = solve(instance, method, seed=seed, time_limit=time_limit, mode=mode)
+    if budget is not None:
+        time_limit = None
+    outcome = solve(instance, method, seed=seed, time_limit=time_limit, mode=mode,
+                    budget=budget, settings=settings)
     fresh = CostEvaluator(instance).evaluate(outcome.solution.routes)
     assert fresh.feasible, fresh.errors
     assert outcome.cost == fresh.J == outcome.solution.cost
@@ -222,6 +230,55 @@ def allocator_checks(method: str | Allocator, *,
         assert outcome.wall_time <= BUDGET_FACTOR * 1.0 + BUDGET_SLACK, outcome.wall_time
 
     add("respects-its-time-budget", respects_its_time_budget)
+
+    def declares_its_budget_use() -> None:
+        cls = _allocator_type(method)
+        use = budget_use(cls)
+        if use != ANYTIME:
+            return
+        names = constructor_keywords(cls)[0]
+        for setting in (cls.work_setting, *cls.unbounded_settings):
+            assert setting in names, f"{setting!r} is not a constructor keyword of {name}"
+        assert isinstance(getattr(cls, "work_unit", None), str), "an anytime method names " \
+            "its work_unit"
+
+    add("declares-its-budget-use", declares_its_budget_use)
+
+    def anytime_under_a_budget() -> None:
+        cls = _allocator_type(method)
+        if budget_use(cls) != ANYTIME:
+            raise CheckSkipped(f"{name} is not an anytime method")
+        if not isinstance(method, str):
+            raise CheckSkipped("a budget lifts the work caps of a method named, not built")
+        outcome = _run(method, timed, "static", seed=3, budget=ANYTIME_BUDGET)
+        assert outcome.wall_time <= BUDGET_FACTOR * ANYTIME_BUDGET + BUDGET_SLACK
+        stats = outcome.stats
+        trace, work = stats.get("trace"), stats.get("work")
+        assert isinstance(work, int) and work >= 1, f"work count {work!r}"
+        assert trace, "a budgeted call records its incumbent trace"
+        times, costs = [p[0] for p in trace], [p[1] for p in trace]
+        assert times == sorted(times) and all(b < a for a, b in itertools.pairwise(costs))
+        assert abs(costs[-1] - outcome.cost) <= 1e-9 * max(1.0, outcome.cost)
+        # The work count reproduces the plan without the budget; half of it is a prefix of
+        # the same search, never better.
+        unbounded = dict(cls.unbounded_settings)
+        again = _run(method, timed, "static", seed=3, time_limit=None,
+                     settings={**unbounded, cls.work_setting: work})
+        assert again.solution.routes == outcome.solution.routes
+        half = _run(method, timed, "static", seed=3, time_limit=None,
+                    settings={**unbounded, cls.work_setting: max(1, work // 2)})
+        assert outcome.cost <= half.cost
+
+    add("anytime-under-a-budget", anytime_under_a_budget)
+
+    def one_pass_under_a_budget() -> None:
+        if budget_use(_allocator_type(method)) != ONE_PASS:
+            raise CheckSkipped(f"{name} is not a one-pass method")
+        plain = _run(method, seeded, "static", time_limit=None)
+        budgeted = _run(method, seeded, "static", budget=ANYTIME_BUDGET * 10)
+        assert budgeted.solution.routes == plain.solution.routes
+
+    add("one-pass-under-a-budget", one_pass_under_a_budget)
 
     def same_seed_same_result(mode: str) -> None:
         first, second = (_run(method, seeded, mode, seed=7), _run(method, seeded, mode, seed=7))

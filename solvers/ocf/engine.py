@@ -35,12 +35,14 @@ every other rejected (AAV, task) pair would be rejected again, so it is not re-e
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from types import MappingProxyType
 from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
@@ -50,12 +52,14 @@ from tsac_bench.model.evaluator import Contribution, PlanState, Proposal
 from tsac_bench.planning import (
     Anchor,
     Interval,
+    NoneOr,
     Options,
     PlanningState,
     PlanResult,
     Settings,
     declare,
 )
+from tsac_bench.planning.budget import ANYTIME, IncumbentTrace, WorkStop, require_a_stop
 from tsac_bench.planning.insertion import best_insertion, removal_route
 
 #: A move must lower J by more than this to count as a strict decrease (Eq. 22): J is a sum
@@ -141,6 +145,8 @@ class CoalitionGame:
         self._proximity_rows: list[tuple[Any, np.ndarray, np.ndarray] | None] = (
             [None] * self.n_aavs)
         self.trajectory: list[float] = [self.plan.cost]
+        # perf_counter time of each trajectory entry: an anytime call's incumbent trace.
+        self.trajectory_at: list[float] = [time.perf_counter()]
         self.decisions: list[Decision] = []
         self.tabu_hits = 0
 
@@ -154,6 +160,7 @@ class CoalitionGame:
         other.rejected = [set(r) for r in self.rejected]
         other.passed = set(self.passed)
         other.trajectory = list(self.trajectory)
+        other.trajectory_at = list(self.trajectory_at)
         other.decisions = list(self.decisions)
         return other
 
@@ -335,6 +342,7 @@ class CoalitionGame:
         self.plan.apply(proposal)
         self.tabu.add(self.key)
         self.trajectory.append(self.plan.cost)
+        self.trajectory_at.append(time.perf_counter())
         # Forget the rejections whose outcome this move may have changed (module docstring).
         self.rejected[n].clear()
         self.passed.clear()
@@ -347,9 +355,11 @@ class CoalitionGame:
 
     # --- Algorithm 1 -------------------------------------------------------------------
     def run(self, rule: SelectionRule, rng: np.random.Generator, *, k_max: int, c_max: int,
-            deadline: float | None = None) -> str:
-        """Play until a stop condition; returns which one: "stable", "k_max", "c_max" or
-        "time-limit". A pass counts as a decision (``k_max``) but not as a rejection.
+            stop: WorkStop | None = None) -> str:
+        """Play until a stop condition; returns which one: "stable", "k_max", "c_max", or
+        ``stop``'s reason ("time-limit", "work": a plan call's time or decision budget,
+        each decision, a pass included, one unit of its work). A pass counts as a decision
+        (``k_max``) but not as a rejection.
 
         ``rng`` draws the AAV orders; the rule draws from a stream spawned from it, which
         does not advance it: the orders of a seed are the same whichever rule plays, so
@@ -365,12 +375,15 @@ class CoalitionGame:
                     return "k_max"
                 if consecutive >= c_max:
                     return "c_max"
-                if deadline is not None and time.perf_counter() > deadline:
-                    return "time-limit"
+                reason = None if stop is None else stop.reached()
+                if reason is not None:
+                    return reason
                 candidates = self.candidates(n)
                 if not candidates:
                     continue
                 decided = True
+                if stop is not None:
+                    stop.done()
                 view = DecisionView(self, n, candidates)
                 m = rule.select(view, choices)
                 if m == PASS and view.can_pass:
@@ -537,21 +550,33 @@ class OCFAllocator(Settings, ABC):
     prefixes alone: every plan call forms the coalitions afresh), ``"incumbent"`` (the plan
     in force, without what is no longer visible; the committed prefixes alone at t = 0) or
     ``"greedy"`` (the ``greedy`` method's plan of this planning state); ``samples``, the
-    number of games per plan call (each from the same start with its own random stream,
-    ``sample_rng``): the plan of the game with the lowest J is returned (ties: the earlier
-    game). A time limit is shared by the games; a game is started only before it expires,
-    the first always."""
+    number of games per plan call (None: no cap), each from the same start with its own
+    random stream (``sample_rng``): the plan of the game with the lowest J is returned
+    (ties: the earlier game); ``decisions``, the most decisions of all games of a plan call
+    together (None: no cap), the work count that reproduces a budgeted call.
+
+    An anytime method (``tsac_bench.planning.budget``): under a budget it plays games until
+    the budget is spent. A time limit is shared by the games and checked before each
+    decision, so the game it interrupts returns the structure it has reached (every
+    structure of a game is a plan); the first game always starts."""
 
     name: ClassVar[str]
     setting_constraints = declare(k_max=Interval(int, 0, None), c_max=Interval(int, 1, None),
-                                  init=Options(*INITS), samples=Interval(int, 1, None))
+                                  init=Options(*INITS),
+                                  samples=NoneOr(Interval(int, 1, None)),
+                                  decisions=NoneOr(Interval(int, 0, None)))
+    budget_use: ClassVar[str] = ANYTIME
+    unbounded_settings: ClassVar[Mapping[str, Any]] = MappingProxyType({"samples": None})
+    work_setting: ClassVar[str] = "decisions"
+    work_unit: ClassVar[str] = "decisions"
 
     def __init__(self, k_max: int = K_MAX, c_max: int = C_MAX, init: str = INIT,
-                 samples: int = SAMPLES) -> None:
+                 samples: int | None = SAMPLES, decisions: int | None = None) -> None:
         self.k_max = k_max
         self.c_max = c_max
         self.init = init
         self.samples = samples
+        self.decisions = decisions
 
     def initial_routes(self, state: PlanningState) -> tuple[Route, ...]:
         if self.init == "incumbent":
@@ -564,29 +589,46 @@ class OCFAllocator(Settings, ABC):
 
     @abstractmethod
     def rule(self, state: PlanningState) -> SelectionRule:
-        """The selection rule for one plan call."""
+        """The selection rule of a plan call's first game."""
+
+    def restart_rule(self, state: PlanningState) -> SelectionRule:
+        """The selection rule of the games after the first (by default the same rule: the
+        games differ by their AAV orders and the rule's own draws)."""
+        return self.rule(state)
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
-        began = time.perf_counter()
-        deadline = None if time_limit is None else began + time_limit
+        require_a_stop(self.name, "samples", time_limit, self.samples, self.decisions)
+        stop = WorkStop(time_limit, self.decisions)
+        trace = IncumbentTrace(stop.began)
         start = self.initial_routes(state)
+        first_rule = self.rule(state)
+        later_rule = None
         best: tuple[CoalitionGame, str] | None = None
         sample_costs: list[float] = []
-        for sample in range(self.samples):
-            if best is not None and deadline is not None and time.perf_counter() > deadline:
+        games = itertools.count() if self.samples is None else range(self.samples)
+        for sample in games:
+            if best is not None and stop.reached() is not None:
                 break
+            if sample == 1:
+                later_rule = self.restart_rule(state)
             game = CoalitionGame(state, start)
-            stop = game.run(self.rule(state), sample_rng(seed, sample), k_max=self.k_max,
-                            c_max=self.c_max, deadline=deadline)
+            ended = game.run(first_rule if sample == 0 else later_rule, sample_rng(seed, sample),
+                             k_max=self.k_max, c_max=self.c_max, stop=stop)
             sample_costs.append(game.cost)
+            for J, at in zip(game.trajectory, game.trajectory_at, strict=True):
+                trace.offer(J, at)
             if best is None or game.cost < best[0].cost:
-                best = (game, stop)
+                best = (game, ended)
+            # A game without a decision found no AAV with a candidate at the start, which
+            # holds in any order: every later game would be the same.
+            if self.samples is None and not game.decisions:
+                break
         assert best is not None
-        game, stop = best
+        game, ended = best
         accepted = len(game.trajectory) - 1
         stats: dict[str, Any] = {
-            "stop": stop,
+            "stop": ended,
             "decisions": len(game.decisions),
             "accepted": accepted,
             "rejected": sum(1 for d in game.decisions if d.op != PASS_OP) - accepted,
@@ -596,7 +638,10 @@ class OCFAllocator(Settings, ABC):
             "trajectory": game.trajectory,
             "sample_J": sample_costs,
             "sample": sample_costs.index(game.cost),
-            "seconds": time.perf_counter() - began,
+            "games": len(sample_costs),
+            "work": stop.work,
+            "trace": trace.points,
+            "seconds": stop.elapsed(),
         }
         cost = game.cost
         assert math.isfinite(cost)

@@ -96,8 +96,10 @@ class HOCFAllocator(OCFAllocator):
 
     def __init__(self, w_urgency: float = 1.0, w_distance: float = 2.0,
                  w_residual: float = 1.0, k_max: int = K_MAX, c_max: int = C_MAX,
-                 init: str = INIT, samples: int = SAMPLES) -> None:
-        super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples)
+                 init: str = INIT, samples: int | None = SAMPLES,
+                 decisions: int | None = None) -> None:
+        super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples,
+                         decisions=decisions)
         self.w_urgency = w_urgency
         self.w_distance = w_distance
         self.w_residual = w_residual

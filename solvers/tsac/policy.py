@@ -77,6 +77,11 @@ _READABLE_FORMATS = ("tsac-bench/policy@1", "tsac-bench/policy@2", POLICY_FORMAT
 #: deviations"); before the verifier the critics' alone, 0.75.
 MARGIN = 0.5
 VERIFY: float | None = 0.25
+#: How the games after a plan call's first decode (``restart``). The default is chosen on
+#: validation instances apart from paper-mc, under equal budgets (docs/tsac.md, "Under a
+#: budget").
+RESTARTS = ("margin", "sample")
+RESTART = "margin"
 #: The feature set the margin rule needs: HOCF's choice is a column of its state.
 MARGIN_FEATURES = FEATURE_SETS[3]
 
@@ -338,7 +343,10 @@ class TSACOCFAllocator(OCFAllocator):
     """Settings: ``policy`` (a policy file; default the shipped one), ``decode`` (``margin``:
     HOCF's choice unless the policy's critics back another by ``margin`` J and, with
     ``verify`` a number, its verifier by ``verify`` J; ``sample``: from the actor at
-    ``temperature``), and the engine's ``k_max``, ``c_max``, ``init``, ``samples``."""
+    ``temperature``), ``restart`` (how the games after a plan call's first decode: ``margin``,
+    the first game's rule on new AAV orders, or ``sample``, from the actor at
+    ``temperature``: best-of-K sampling, where a learned policy's worth under a budget is its
+    diversity), and the engine's ``k_max``, ``c_max``, ``init``, ``samples``, ``decisions``."""
 
     name = "tsac-ocf"
     setting_constraints = declare(**OCFAllocator.setting_constraints,
@@ -346,18 +354,22 @@ class TSACOCFAllocator(OCFAllocator):
                                   decode=Decoding(),
                                   temperature=Interval(float, 0, None),
                                   margin=Interval(float, 0, None),
-                                  verify=NoneOr(VerifyMargin()))
+                                  verify=NoneOr(VerifyMargin()),
+                                  restart=Options(*RESTARTS))
 
     def __init__(self, policy: str | None = None, decode: str = "margin",
                  temperature: float = 1.0, margin: float = MARGIN,
-                 verify: float | None = VERIFY, k_max: int = K_MAX, c_max: int = C_MAX,
-                 init: str = INIT, samples: int = SAMPLES) -> None:
-        super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples)
+                 verify: float | None = VERIFY, restart: str = RESTART, k_max: int = K_MAX,
+                 c_max: int = C_MAX, init: str = INIT, samples: int | None = SAMPLES,
+                 decisions: int | None = None) -> None:
+        super().__init__(k_max=k_max, c_max=c_max, init=init, samples=samples,
+                         decisions=decisions)
         self.policy = policy
         self.decode = decode
         self.temperature = temperature
         self.margin = margin
         self.verify = verify
+        self.restart = restart
 
     def rule(self, state: PlanningState) -> SelectionRule:
         del state
@@ -374,6 +386,11 @@ class TSACOCFAllocator(OCFAllocator):
                        else VerifierCheck(policy.verified, self.verify))
             return MarginSelection(policy.values, self.margin, confirm)
         return PolicySelection(policy.actor, self.temperature)
+
+    def restart_rule(self, state: PlanningState) -> SelectionRule:
+        if self.restart == "sample":
+            return PolicySelection(policy_at(self.policy).actor, self.temperature)
+        return self.rule(state)
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:

@@ -15,6 +15,12 @@ from tsac_bench.solvers.dga import DGAAllocator
 SMALL = {"islands": 2, "population": 4, "generations": 6, "migration_interval": 3}
 
 
+def untimed(stats: dict) -> dict:
+    """A plan call's stats without its clock readings (the trace's J values kept)."""
+    return {**{k: v for k, v in stats.items() if k != "seconds"},
+            "trace": [cost for _, cost in stats["trace"]]}
+
+
 def test_best_J_never_rises_and_ends_at_the_returned_plan():
     # Every child mutated: without elitism this run's best rises (checked by hand).
     instance = generate("8/20", seed=3)
@@ -32,8 +38,8 @@ def test_deterministic_per_seed():
     state = PlanningState.static(generate("8/20", seed=4))
     runs = [DGAAllocator(**SMALL).plan(state, seed=seed) for seed in (7, 7, 8)]
     assert runs[0].routes == runs[1].routes
-    assert runs[0].stats == runs[1].stats
-    assert runs[0].stats != runs[2].stats
+    assert untimed(runs[0].stats) == untimed(runs[1].stats)
+    assert untimed(runs[0].stats) != untimed(runs[2].stats)
 
 
 def test_islands_in_worker_processes_give_the_same_plan():
@@ -41,7 +47,7 @@ def test_islands_in_worker_processes_give_the_same_plan():
     here = DGAAllocator(**SMALL).plan(state, seed=3)
     apart = DGAAllocator(**SMALL, workers=2).plan(state, seed=3)
     assert apart.routes == here.routes
-    assert apart.stats == here.stats
+    assert untimed(apart.stats) == untimed(here.stats)
 
 
 def test_finds_the_optimum_of_a_two_task_instance():
@@ -92,6 +98,23 @@ def test_a_spent_time_budget_returns_the_initial_population_best():
     assert result.stats["stop"] == "time-limit" and result.stats["generations"] == 0
     assert state.violations(result.routes) == []
     assert CostEvaluator(state.instance).evaluate(result.routes).feasible
+
+
+def test_a_budget_evolves_past_the_generation_cap_and_counts_individuals():
+    """Without a generation cap the first 25 generations are the plain call's (the same
+    epochs, the same streams), so the budgeted plan is never worse; 2 islands of 8 build 16
+    individuals first and 14 per generation (the elite survives), so 25 generations are
+    16 + 25 * 14 = 366 individuals."""
+    state = PlanningState.static(generate("4/10", seed=2))
+    plain = make_allocator("dga").plan(state, seed=3)
+    assert plain.stats["work"] == 16 + 25 * 14
+    budgeted = make_allocator("dga:generations=none").plan(state, seed=3, time_limit=1.5)
+    assert budgeted.stats["generations"] > 25
+    assert budgeted.stats["best_J_per_generation"][:26] == plain.stats["best_J_per_generation"]
+    assert budgeted.stats["trace"][-1][1] == min(budgeted.stats["best_J_per_generation"])
+    # An individual cap stops it mid-generation, exactly there.
+    capped = make_allocator("dga:generations=none:evaluations=50").plan(state, seed=3)
+    assert capped.stats["work"] == 50 and capped.stats["stop"] == "work"
 
 
 @pytest.mark.parametrize(("settings", "message"), [

@@ -11,6 +11,7 @@ from tsac_bench.model import Instance, Visit
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import generate
 from tsac_bench.planning import PlanningState, make_allocator
+from tsac_bench.planning.budget import WorkStop
 from tsac_bench.planning.insertion import best_insertion, removal_route
 from tsac_bench.planning.simulator import simulate
 from tsac_bench.planning.solve import solve
@@ -259,9 +260,34 @@ def test_stop_conditions():
     assert stop == "c_max" and game.decisions[-1].accepted is False
     game = CoalitionGame(state)
     assert game.run(UniformSelection(), np.random.default_rng(0), k_max=10**6, c_max=10,
-                    deadline=0.0) == "time-limit"
+                    stop=WorkStop(0.0, None)) == "time-limit"
     result = make_allocator("rocf").plan(state, time_limit=0.0)
     assert result.stats["stop"] == "time-limit" and result.stats["decisions"] == 0
+    # A plan call's decisions, over all its games, stop it at exactly that count.
+    result = make_allocator("rocf:samples=none:decisions=25").plan(state)
+    assert result.stats["stop"] == "work" and result.stats["work"] == 25
+    assert sum(1 for _ in result.stats["sample_J"]) == result.stats["games"]
+
+
+@pytest.mark.parametrize("method", ["hocf", "rocf", "tsac-ocf"])
+def test_a_budget_plays_games_after_the_first_and_keeps_the_best(method):
+    """Game 0 of a budgeted call is the plain call's game (same seed, same stream), so the
+    budgeted plan is never worse; the call records the games played and its trace ends at
+    its J."""
+    state = PlanningState.static(generate("8/20", seed=4))
+    plain = make_allocator(method).plan(state, seed=5)
+    budgeted = make_allocator(f"{method}:samples=none").plan(state, seed=5, time_limit=0.6)
+    assert budgeted.stats["sample_J"][0] == plain.cost
+    assert budgeted.stats["games"] >= 2
+    assert budgeted.cost == min(budgeted.stats["sample_J"]) <= plain.cost
+    assert budgeted.stats["trace"][-1][1] == budgeted.cost
+    assert budgeted.stats["trace"][0][1] == plain.stats["J_initial"]
+
+
+def test_an_open_ended_call_is_refused():
+    state = PlanningState.static(generate("4/10", seed=2))
+    with pytest.raises(InvalidSetting, match="'samples': none needs a budget"):
+        make_allocator("hocf:samples=none").plan(state)
 
 
 def test_a_rule_must_pick_a_candidate():

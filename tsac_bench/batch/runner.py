@@ -12,6 +12,7 @@ whose method takes other settings today than it ran with is kept and named in a 
 
 from __future__ import annotations
 
+import itertools
 import os
 import shlex
 import sys
@@ -43,6 +44,7 @@ from tsac_bench.planning import (
     resolve_spec,
     supported_modes,
 )
+from tsac_bench.planning.budget import budgeted_settings, check_budget
 from tsac_bench.planning.solve import recorded_settings
 
 #: Default solver time limit, in seconds per 10 tasks (never below one unit), of one plan
@@ -164,34 +166,40 @@ def resolve_modes(mode: str) -> list[str]:
 
 def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec],
               modes: Sequence[str], seeds: int, time_limit: float | None,
-              grace: float = GRACE_SECONDS) -> list[Job]:
-    """One job per (instance, method spec, mode, seed). A job's ``method`` in the store is the
-    spec's label (the name alone without settings, so stores of plain names resume)."""
+              grace: float = GRACE_SECONDS,
+              budgets: Sequence[float] | None = None) -> list[Job]:
+    """One job per (instance, method spec, mode, seed, budget). A job's ``method`` in the
+    store is the spec's label (the name alone without settings, so stores of plain names
+    resume). With ``budgets`` each plan call has a budget's seconds (its time limit: an
+    anytime method spends them, ``tsac_bench.planning.budget``); without, the time limit."""
     jobs = []
     for loaded in instances:
         instance = loaded.instance
         for method in methods:
-            limit = (time_limit if time_limit is not None
-                     else default_time_limit(method.name, instance.n_tasks))
+            own_limit = (time_limit if time_limit is not None
+                         else default_time_limit(method.name, instance.n_tasks))
             modes_of_method = supported_modes(allocator_class(method.name))
             # A method that plans only some modes gets no job in the others (not a failure).
-            for mode in (m for m in modes if m in modes_of_method):
-                for seed in range(seeds):
-                    key = job_key(instance.name, method.label, mode, seed)
-                    spec = {"key": key, "instance": loaded.data, "instance_file": str(loaded.path),
-                            "method": method.name, "mode": mode, "seed": seed,
-                            "time_limit": limit, "settings": dict(method.settings),
-                            "grace": grace}
-                    row = {"key": key, "instance": instance.name,
-                           "instance_set": loaded.instance_set,
-                           "instance_file": str(loaded.path), "scale": instance.scale,
-                           "n_aavs": instance.n_aavs, "n_tasks": instance.n_tasks,
-                           "method": method.label, "mode": mode, "seed": seed,
-                           "settings": dict(method.settings), "time_limit": limit,
-                           "J_star": loaded.reference.J_star,
-                           "lower_bound": loaded.reference.lower_bound,
-                           "reference": loaded.reference.source}
-                    jobs.append(Job(spec, row, loaded))
+            for mode, seed, budget in itertools.product(
+                    [m for m in modes if m in modes_of_method], range(seeds),
+                    budgets or [None]):
+                key = job_key(instance.name, method.label, mode, seed, budget)
+                limit = own_limit if budget is None else budget
+                spec = {"key": key, "instance": loaded.data, "instance_file": str(loaded.path),
+                        "method": method.name, "mode": mode, "seed": seed,
+                        "time_limit": limit, "budget": budget,
+                        "settings": dict(method.settings), "grace": grace}
+                row = {"key": key, "instance": instance.name,
+                       "instance_set": loaded.instance_set,
+                       "instance_file": str(loaded.path), "scale": instance.scale,
+                       "n_aavs": instance.n_aavs, "n_tasks": instance.n_tasks,
+                       "method": method.label, "mode": mode, "seed": seed,
+                       "settings": dict(method.settings), "time_limit": limit,
+                       "budget": budget,
+                       "J_star": loaded.reference.J_star,
+                       "lower_bound": loaded.reference.lower_bound,
+                       "reference": loaded.reference.source}
+                jobs.append(Job(spec, row, loaded))
     # Longest jobs first: a slow exact job started last would leave the other cores idle.
     jobs.sort(key=lambda j: -(hard_timeout(j.spec) or float("inf")))
     return jobs
@@ -209,7 +217,8 @@ def record_result(store: ResultStore, job: Job, result: dict[str, Any]) -> str:
     row = {**job.row, "status": result["status"], "message": result["message"],
            "detail": result.get("detail") or None, "runtime": result["runtime"],
            "stats": result["stats"], "versions": result["versions"],
-           "host": result["host"], "J": None, "J_load": None, "J_time": None, "J_op": None,
+           "host": result["host"], "over_budget": result.get("over_budget"),
+           "J": None, "J_load": None, "J_time": None, "J_op": None,
            "solution_file": None,
            "finished_at": datetime.now(UTC).isoformat(timespec="seconds")}
     if result["status"] == OK:
@@ -221,7 +230,8 @@ def record_result(store: ResultStore, job: Job, result: dict[str, Any]) -> str:
                        + "; ".join(str(e) for e in evaluation.errors))
         else:
             relative = store.solution_path(job.row["instance_set"], instance.name,
-                                           job.row["method"], job.row["mode"], job.row["seed"])
+                                           job.row["method"], job.row["mode"], job.row["seed"],
+                                           job.row["budget"])
             write_solution(solution.with_cost(evaluation.J), instance, store.run_dir / relative)
             row.update(J=evaluation.J, J_load=evaluation.terms["load"],
                        J_time=evaluation.terms["time"], J_op=evaluation.terms["op"],
@@ -240,6 +250,7 @@ class RunConfig:
     mode: str = "auto"
     seeds: int = 1
     time_limit: float | None = None
+    budgets: list[float] | None = None
     jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
     executor: str = "local"
     scheduler: str | None = None
@@ -266,12 +277,23 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
         raise TsacBenchError("--seeds: must be at least 1")
     if config.time_limit is not None and config.time_limit <= 0:
         raise TsacBenchError("--time-limit: must be positive")
+    if config.budgets is not None:
+        if config.time_limit is not None:
+            raise TsacBenchError("--budget: not with --time-limit (a budget is the time limit "
+                                 "of every plan call)")
+        if not config.budgets:
+            raise TsacBenchError("--budget: expected seconds, e.g. 0.1,1,10")
+        for budget in config.budgets:
+            check_budget(budget)
     if config.grace < 0:
         raise TsacBenchError("--grace: must be >= 0")
     modes = resolve_modes(config.mode)
     methods, method_notes = resolve_methods(config.methods)
     if not methods:
         raise TsacBenchError("no method to run: `tsac-bench methods` lists them")
+    if config.budgets is not None:
+        for method in methods:  # a spec that a budget contradicts fails here, not per job
+            budgeted_settings(method.name, allocator_class(method.name), method.settings)
     loaded, problems = load_instances(config.paths)
     outcome = BatchOutcome(config.out, problems=problems)
     sweep_notes = [f"skipped sweep set {sweep} (name it to run it)"
@@ -279,12 +301,14 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
     for line in [*method_notes, *sweep_notes, *problems]:
         note(line)
     jobs = plan_jobs(loaded, methods, modes, config.seeds, config.time_limit,
-                     config.grace)
+                     config.grace, config.budgets)
     outcome.total = len(jobs)
     with ResultStore(config.out) as store:
         done = store.finished_keys(["ok"] if config.retry_failed else None)
         todo = [job for job in jobs if job.spec["key"] not in done]
         outcome.skipped = len(jobs) - len(todo)
+        if config.budgets is not None:
+            record_calibration(store, note)
         store.set_meta({"command": shlex.join(sys.argv),
                         "methods": [method.label for method in methods], "modes": modes,
                         "seeds": config.seeds, "paths": [str(p) for p in config.paths],
@@ -305,6 +329,20 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
                     note(f"{spec['key']}: {status}: {result['message'] or status}")
                 advance(status != OK)
     return outcome
+
+
+def record_calibration(store: ResultStore, note: Callable[[str], None]) -> None:
+    """Time the machine-speed reference (``calibrate``) and store it in the run's meta:
+    ``calibration`` the latest, ``calibrations`` every one (a run resumed on another machine
+    adds its own)."""
+    from tsac_bench.batch.calibrate import calibrate
+
+    calibration = calibrate()
+    earlier = store.meta().get("calibrations", [])
+    store.set_meta({"calibration": calibration, "calibrations": [*earlier, calibration]})
+    note(f"calibration: the reference workload takes {calibration['seconds']:.4f} s on "
+         f"{calibration['host']} (a budget of 1 s is {1 / calibration['seconds']:.1f} "
+         "reference units)")
 
 
 _ABSENT = object()

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from tsac_bench.errors import InputError, TsacBenchError
-from tsac_bench.planning.settings import file_label
+from tsac_bench.planning.settings import file_label, format_value
 
 DB_NAME = "results.sqlite"
 #: The status of a job that produced a scored solution; anything else is a failure.
@@ -42,6 +42,8 @@ COLUMNS: dict[str, str] = {
     "seed": "INTEGER NOT NULL",
     "settings": "TEXT",  # JSON
     "time_limit": "REAL",
+    "budget": "REAL",  # seconds per plan call; NULL: the method's own stopping rule
+    "over_budget": "INTEGER",  # plan calls that returned later than the budget allows
     "status": "TEXT NOT NULL",
     "message": "TEXT",
     "detail": "TEXT",
@@ -62,8 +64,12 @@ COLUMNS: dict[str, str] = {
 JSON_COLUMNS = ("settings", "stats", "versions")
 
 
-def job_key(instance: str, method: str, mode: str, seed: int) -> str:
-    return f"{instance}|{method}|{mode}|{seed}"
+def job_key(instance: str, method: str, mode: str, seed: int,
+            budget: float | None = None) -> str:
+    """A job's key; a job without a budget has the key of stores written before budgets
+    existed."""
+    key = f"{instance}|{method}|{mode}|{seed}"
+    return key if budget is None else f"{key}|budget={format_value(float(budget))}"
 
 
 class ResultStore:
@@ -81,6 +87,10 @@ class ResultStore:
         self._conn.execute("PRAGMA synchronous=FULL")
         columns = ", ".join(f'"{name}" {kind}' for name, kind in COLUMNS.items())
         self._conn.execute(f"CREATE TABLE IF NOT EXISTS jobs ({columns})")
+        # A store written before a column existed gains it (NULL in its old rows).
+        present = {row[1] for row in self._conn.execute("PRAGMA table_info(jobs)")}
+        for name in COLUMNS.keys() - present:
+            self._conn.execute(f'ALTER TABLE jobs ADD COLUMN "{name}" {COLUMNS[name]}')
         self._conn.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT)")
 
     def close(self) -> None:
@@ -123,11 +133,12 @@ class ResultStore:
         self._conn.execute("COMMIT")
 
     def solution_path(self, instance_set: str, instance: str, method: str, mode: str,
-                      seed: int) -> Path:
+                      seed: int, budget: float | None = None) -> Path:
         """Where a job's solution file goes, relative to the run directory (``method``: the
         spec label)."""
+        tail = "" if budget is None else "-b" + file_label(format_value(float(budget)))
         return Path(SOLUTIONS_DIR, instance_set, instance,
-                    f"{file_label(method)}-{mode}-s{seed}.json")
+                    f"{file_label(method)}-{mode}-s{seed}{tail}.json")
 
     # --- reading ---------------------------------------------------------------------------
     def finished_keys(self, statuses: Iterable[str] | None = None) -> set[str]:

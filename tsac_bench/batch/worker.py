@@ -67,9 +67,10 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
 
     instance = instance_from_dict(spec["instance"], spec.get("instance_file", "<instance>"))
     try:
+        budget = spec.get("budget")
         outcome = solve(instance, spec["method"], seed=spec["seed"],
-                        time_limit=spec.get("time_limit"), mode=spec["mode"],
-                        settings=spec.get("settings") or {})
+                        time_limit=spec.get("time_limit") if budget is None else None,
+                        mode=spec["mode"], settings=spec.get("settings") or {}, budget=budget)
         solution, evaluation, stats = outcome.solution, outcome.evaluation, dict(outcome.stats)
     except InvalidPlan as exc:
         return failure("invalid", str(exc))
@@ -81,6 +82,7 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     return {"status": "ok", "message": "", "detail": "",
             "solution": solution_to_dict(solution, instance), "J": evaluation.J,
             "terms": dict(evaluation.terms), "runtime": outcome.wall_time,
+            "over_budget": outcome.over_budget if budget is not None else None,
             "stats": jsonable(stats), "versions": _versions(spec["method"]),
             "host": socket.gethostname()}
 

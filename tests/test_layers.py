@@ -19,7 +19,7 @@ LAYERS = (
     # Inside reporting, each concept builds on the ones before it; figures depend only on
     # data types and statistics, as PyVRP's plotting does.
     ("tsac_bench.reporting", "tsac_bench.reporting.data"),
-    ("tsac_bench.reporting.stats",),
+    ("tsac_bench.reporting.stats", "tsac_bench.reporting.budgets"),
     ("tsac_bench.reporting.tables", "tsac_bench.reporting.figures"),
     ("tsac_bench.reporting.report",),
     ("tsac_bench.cli", "tsac_bench.__main__", "tsac_bench"),

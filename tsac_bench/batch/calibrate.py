@@ -46,8 +46,3 @@ def calibrate(repeats: int = REPEATS) -> dict[str, Any]:
     return {"host": socket.gethostname(), "seconds": statistics.median(timings),
             "repeats": timings, "workload": WORKLOAD,
             "measured_at": datetime.now(UTC).isoformat(timespec="seconds")}
-
-
-def reference_units(budget: float, calibration: dict[str, Any] | None) -> float | None:
-    """A budget in reference units (None without a calibration)."""
-    return None if not calibration else budget / calibration["seconds"]

@@ -39,6 +39,7 @@ __all__ = [
     "check_budget",
     "is_over_budget",
     "over_budget_limit",
+    "reference_units",
     "require_a_stop",
 ]
 
@@ -101,6 +102,12 @@ def over_budget_limit(budget: float) -> float:
 
 def is_over_budget(seconds: float, budget: float | None) -> bool:
     return budget is not None and seconds > over_budget_limit(budget)
+
+
+def reference_units(budget: float, calibration: Mapping[str, Any] | None) -> float | None:
+    """A budget in reference units: seconds divided by the reference workload's seconds on
+    the machine (``tsac_bench.batch.calibrate``); None without a calibration."""
+    return None if not calibration else budget / calibration["seconds"]
 
 
 class WorkStop:

@@ -13,7 +13,9 @@ How the numbers are made (docs/reports.md says the same for readers of a report)
   bound on the true gap.
 
 Method labels are whatever the store's ``method`` column holds (a registered name or a method
-spec such as ``hocf:init=incumbent``); nothing here takes them apart.
+spec such as ``hocf:init=incumbent``); nothing here takes them apart. A job with a budget per
+plan call is its own series, ``hocf @ 1 s`` (``method_label``): no table or figure averages
+over budgets, and a store without budgets shows its labels as they are.
 """
 
 from __future__ import annotations
@@ -39,6 +41,29 @@ def load(run_dir: str | Path) -> pd.DataFrame:
 def load_meta(run_dir: str | Path) -> dict[str, Any]:
     with ResultStore(run_dir, create=False) as store:
         return store.meta()
+
+
+def seconds_text(seconds: float) -> str:
+    """A budget as every table and caption prints it: ``0.1 s``, ``1 s``."""
+    return f"{seconds:g} s"
+
+
+def method_label(method: str, budget: float | None) -> str:
+    """The series a job belongs to: its method label, with its budget where it had one."""
+    if budget is None or pd.isna(budget):
+        return method
+    return f"{method} @ {seconds_text(budget)}"
+
+
+def by_series(frame: pd.DataFrame) -> pd.DataFrame:
+    """``frame`` with each job's ``method`` replaced by its series (``method_label``) and no
+    ``budget`` column, which the label now carries (so a second call changes nothing); a frame
+    without one (hand-made, or read from an old export) as it is."""
+    if "budget" not in frame.columns:
+        return frame
+    labels = [method_label(m, b) for m, b in zip(frame["method"], frame["budget"], strict=True)]
+    return frame.assign(method=pd.Series(labels, index=frame.index, dtype=object)).drop(
+        columns="budget")
 
 
 def scale_order(scales: Sequence[str]) -> list[str]:
@@ -84,8 +109,9 @@ def references(frame: pd.DataFrame) -> pd.DataFrame:
 
 def per_instance(frame: pd.DataFrame) -> pd.DataFrame:
     """One row per (mode, scale, instance, method): J and its terms averaged over the seeds
-    that succeeded, with the instance's references and gaps."""
-    ok = frame[frame["status"] == OK]
+    that succeeded, with the instance's references and gaps; ``method`` is the series
+    (``method_label``)."""
+    ok = by_series(frame[frame["status"] == OK])
     keys = ["mode", "scale", "instance", "method"]
     values = ["J", "J_load", "J_time", "J_op", "runtime"]
     if ok.empty:
@@ -158,7 +184,7 @@ def coalition_sizes(frame: pd.DataFrame, run_dir: Path) -> pd.DataFrame:
 
     loader = SolutionLoader(run_dir)
     rows = []
-    for _, row in frame[frame["status"] == OK].iterrows():
+    for _, row in by_series(frame[frame["status"] == OK]).iterrows():
         loaded = loader.solution(row)
         if loaded is None:
             continue

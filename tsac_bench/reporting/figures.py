@@ -6,7 +6,9 @@
   evaluator from the stored solutions);
 * for one dynamic instance, a Gantt chart of every AAV's visits with, where the run's stats
   carry the simulator's re-plans, the J of the plan in force after each re-plan (Fig. 5);
-* route maps of one instance per scale.
+* route maps of one instance per scale;
+* J against the budget per plan call (``budgets.budget_curves``), drawn by the report's
+  section on budgets.
 
 Every figure is drawn from the frames and objects of ``data`` (and ``stats`` for the
 performance ratios); nothing here reads a store or writes a table. Imported only when a report
@@ -31,11 +33,13 @@ from tsac_bench.batch.store import OK
 from tsac_bench.planning.settings import file_label
 from tsac_bench.reporting.data import (
     SolutionLoader,
+    by_series,
     coalition_sizes,
     ordered_modes,
     replan_costs,
     replan_records,
     scale_order,
+    seconds_text,
 )
 from tsac_bench.reporting.stats import performance_ratios
 
@@ -57,6 +61,7 @@ def _save(fig: Any, path: Path) -> Path:
 def draw_all(frame: pd.DataFrame, instances: pd.DataFrame, run_dir: Path,
              out: Path) -> list[Figure]:
     """Every figure the run's data allows; a figure without data is listed with a note."""
+    frame = by_series(frame)  # a method at a budget is a panel and a file of its own
     figures: list[Figure] = []
     modes = ordered_modes(frame["mode"].unique())
     loader = SolutionLoader(run_dir)
@@ -225,6 +230,52 @@ def gantt_figure(instance: Any, solution: Any, curve: tuple[list[float], list[fl
         cost_ax.set_ylabel(COST_AXIS_LABEL, fontsize=8)
         cost_ax.grid(alpha=0.3)
     axes[-1][0].set_xlabel("time (s); dashed: task releases")
+    fig.tight_layout()
+    return fig
+
+
+# --- cost against budget ----------------------------------------------------------------
+def cost_against_budget(curves: pd.DataFrame, mode: str, reference: float | None,
+                        out: Path) -> Figure:
+    """The figure of J against budget of one mode (``budget_figure``), saved."""
+    note = ("Median J over the instances (each J the mean over seeds) per method against the "
+            "budget per plan call, log scale, with the interquartile range as a band"
+            + ("; top axis: the budget in reference units." if reference else "."))
+    return (f"Total cost J against the budget per plan call ({mode})",
+            [_save(budget_figure(curves[curves["mode"] == mode], reference),
+                   out / f"budget-J-{mode}")], note)
+
+
+def budget_figure(curves: pd.DataFrame, reference: float | None = None) -> Any:
+    """One panel per scale: per method, the median J against the budget (log x axis) and
+    the band between the quartiles; a top axis in reference units where ``reference`` (the
+    calibration's seconds) is known."""
+    scales = scale_order(curves["scale"].unique())
+    budgets = sorted(curves["budget"].unique())
+    fig, axes = plt.subplots(1, len(scales), figsize=(max(4.4, 3.2 * len(scales)), 3.6),
+                             squeeze=False)
+    for ax, scale in zip(axes[0], scales, strict=True):
+        rows = curves[curves["scale"] == scale]
+        for method in sorted(rows["method"].unique()):
+            line = rows[rows["method"] == method].sort_values("budget")
+            drawn = ax.plot(line["budget"], line["median"], marker="o", label=method)
+            ax.fill_between(line["budget"], line["q1"], line["q3"], alpha=0.2,
+                            color=drawn[0].get_color(), lw=0)
+        ax.set_xscale("log")
+        ax.set_xticks(budgets, [seconds_text(b) for b in budgets])
+        ax.minorticks_off()
+        ax.set_xlabel("budget per plan call")
+        ax.set_title(scale)
+        ax.grid(alpha=0.3)
+        if reference:
+            top = ax.secondary_xaxis("top", functions=(lambda b: b / reference,
+                                                       lambda u: u * reference))
+            units = [b / reference for b in budgets]
+            top.set_xticks(units, [f"{u:.3g}" for u in units])
+            top.minorticks_off()
+            top.set_xlabel("reference units", fontsize="small")
+    axes[0][0].set_ylabel("total cost J")
+    axes[0][-1].legend(fontsize="small")
     fig.tight_layout()
     return fig
 

@@ -1,6 +1,7 @@
 """The report of a run directory: ``tsac-bench report results/NAME --out reports/NAME``
 writes ``index.md`` with the run's description, the tables of ``tables`` (Markdown, LaTeX
-and CSV), the statistics of ``stats`` and the figures of ``figures``.
+and CSV), the statistics of ``stats`` and the figures of ``figures``; a run with budgets per
+plan call also gets, per mode, its cost against budget (``budgets``).
 
 The report carries no absolute path of the machine that wrote it: the results store is given
 relative to the report, and the command that made the run as the user would type it
@@ -11,12 +12,20 @@ from __future__ import annotations
 
 import os
 import shlex
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from tsac_bench.batch.store import OK
+from tsac_bench.reporting.budgets import (
+    budget_curves,
+    budget_table,
+    budgeted,
+    paired_tests,
+    primal_table,
+)
 from tsac_bench.reporting.data import (
     below_reference,
     load,
@@ -27,12 +36,18 @@ from tsac_bench.reporting.data import (
 )
 from tsac_bench.reporting.stats import comparisons
 from tsac_bench.reporting.tables import (
+    budget_footing,
+    budget_latex,
+    budget_markdown,
+    budget_text,
     comparison_markdown,
     latex_pivot,
     latex_table,
     markdown_pivot,
     markdown_table,
     method_table,
+    primal_latex,
+    primal_markdown,
 )
 
 
@@ -50,10 +65,13 @@ def write_report(run_dir: str | Path, out: str | Path) -> Path:
 
     index = [f"# tsac-bench report: {run_dir.name}", ""]
     index += _run_section(frame, meta, run_dir, out)
+    budgets = budget_table(frame)
     for mode in ordered_modes(frame["mode"].unique()):
         index += [f"## {mode.capitalize()} mode", ""]
         index += _tables_section(table, mode, tables_dir)
         index += _comparison_section(frame, mode, tables_dir)
+        if (budgets["mode"] == mode).any():
+            index += _budget_section(frame, budgets, mode, meta.get("calibration"), out)
     index += _figure_section(frame, instances, run_dir, out)
     below = below_reference(frame)
     if not below.empty:
@@ -112,6 +130,46 @@ def _comparison_section(frame: pd.DataFrame, mode: str, tables_dir: Path) -> lis
             "the best method, p-values Holm-corrected.", "", stats_md]
 
 
+def _budget_section(frame: pd.DataFrame, budgets: pd.DataFrame, mode: str,
+                    calibration: dict[str, Any] | None, out: Path) -> list[str]:
+    """Cost against budget of ``mode``: the budget table and its paired tests, the figure
+    of J against budget and, in static mode, the primal integrals."""
+    tables_dir = out / "tables"
+    rows = budgets[budgets["mode"] == mode]
+    tests = paired_tests(frame, rows)
+    name = f"budget-{mode}"
+    budget_md = budget_markdown(rows, tests, mode, calibration)
+    (tables_dir / f"{name}.md").write_text(budget_md, encoding="utf-8")
+    (tables_dir / f"{name}.tex").write_text(budget_latex(rows, tests, mode, calibration),
+                                           encoding="utf-8")
+    rows.to_csv(tables_dir / f"{name}.csv", index=False)
+    tests.to_csv(tables_dir / f"budget-tests-{mode}.csv", index=False)
+    footing = budget_footing(rows, calibration)
+    if frame.loc[frame["mode"] == mode, "budget"].isna().any():
+        footing += (" A method named without `@` in the tables above ran by its own stopping "
+                    "rule, without a budget.")
+    lines = ["### Cost against budget", "", footing, "",
+             f"LaTeX: [tables/{name}.tex](tables/{name}.tex) (a `longtable`; "
+             f"`\\usepackage{{booktabs,longtable}}`); numbers: [tables/{name}.csv]"
+             f"(tables/{name}.csv), [tables/budget-tests-{mode}.csv]"
+             f"(tables/budget-tests-{mode}.csv).", "", budget_md]
+    reference = float(calibration["seconds"]) if calibration else None
+    lines += _draw(lambda figures: [figures.cost_against_budget(
+        budget_curves(frame), mode, reference, out / "figures")], out)
+    if mode == "static":
+        primal = primal_table(frame)
+        if not primal.empty:
+            primal_md = primal_markdown(primal, calibration)
+            (tables_dir / "primal-static.md").write_text(primal_md, encoding="utf-8")
+            (tables_dir / "primal-static.tex").write_text(primal_latex(primal, calibration),
+                                                          encoding="utf-8")
+            primal.to_csv(tables_dir / "primal-static.csv", index=False)
+            lines += ["#### Primal integral and time to target (static mode)", "",
+                      "LaTeX: [tables/primal-static.tex](tables/primal-static.tex); numbers: "
+                      "[tables/primal-static.csv](tables/primal-static.csv).", "", primal_md]
+    return lines
+
+
 def _run_section(frame: pd.DataFrame, meta: dict[str, Any], run_dir: Path,
                  out: Path) -> list[str]:
     ok = frame["status"] == OK
@@ -136,11 +194,25 @@ def _run_section(frame: pd.DataFrame, meta: dict[str, Any], run_dir: Path,
         f"{int((refs['J_star'].isna() & refs['lower_bound'].notna()).sum())}",
         f"- versions: {', '.join(f'{k} {v}' for k, v in sorted(versions.items()))}",
         f"- hosts: {', '.join(sorted(frame['host'].dropna().unique()))}",
+        *_budgets_line(frame, meta.get("calibration")),
         "- per-instance numbers: [tables/per_instance.csv](tables/per_instance.csv); "
         "all cells: [tables/summary.csv](tables/summary.csv)",
         "",
     ]
     return lines
+
+
+def _budgets_line(frame: pd.DataFrame, calibration: dict[str, Any] | None) -> list[str]:
+    """The run's budgets per plan call and its machine-speed reference, if it has budgets."""
+    jobs = budgeted(frame)
+    if jobs.empty:
+        return []
+    line = ("- budgets per plan call: "
+            + ", ".join(budget_text(b, calibration) for b in sorted(jobs["budget"].unique())))
+    if calibration:
+        line += (f"; reference workload: {calibration.get('workload', '?')}, "
+                 f"{float(calibration['seconds']):.4g} s on {calibration.get('host', '?')}")
+    return [line]
 
 
 # --- no path of this machine ------------------------------------------------------------
@@ -198,13 +270,22 @@ def portable(text: str, cwd: Path | None = None) -> str:
 
 def _figure_section(frame: pd.DataFrame, instances: pd.DataFrame, run_dir: Path,
                     out: Path) -> list[str]:
+    return ["## Figures", "", *_draw(lambda figures: figures.draw_all(
+        frame, instances, run_dir, out / "figures"), out, level="###")]
+
+
+def _draw(draw: Callable[[Any], list[tuple[str, list[Path], str]]], out: Path,
+          level: str = "####") -> list[str]:
+    """Index lines of the figures ``draw(figures module)`` saves: a heading of ``level`` per
+    figure, its note, each PNG and a link to its PDF; one line where matplotlib is
+    missing."""
     try:
         from tsac_bench.reporting import figures
     except ImportError as exc:
-        return ["## Figures", "", f"Not drawn: {exc} (pip install -e '.[report]').", ""]
-    lines = ["## Figures", ""]
-    for title, paths, note in figures.draw_all(frame, instances, run_dir, out / "figures"):
-        lines += [f"### {title}", ""]
+        return [f"Not drawn: {exc} (pip install -e '.[report]').", ""]
+    lines = []
+    for title, paths, note in draw(figures):
+        lines += [f"{level} {title}", ""]
         if note:
             lines += [note, ""]
         for path in paths:

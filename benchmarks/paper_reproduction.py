@@ -40,7 +40,7 @@ from tsac_bench.batch.runner import RunConfig, run_batch
 from tsac_bench.planning import is_exact_method
 from tsac_bench.reporting.data import load, per_instance, scale_order
 from tsac_bench.reporting.report import write_report
-from tsac_bench.reporting.stats import gap_measures
+from tsac_bench.reporting.stats import gap_measures, normal_half_width
 
 ROOT = Path(__file__).resolve().parent.parent
 SETS = ROOT / "instances" / "paper-mc"
@@ -58,6 +58,12 @@ BUDGET_OUT = ROOT / "results" / "paper-reproduction-budgets"
 BUDGET_REPORT = REPORT / "budgets"
 #: The OCF methods, run in dynamic mode from the plan in force as well as empty.
 OCF_METHODS = ("hocf", "rocf", "tsac-ocf")
+#: The equal-budget rows per instance, committed: the README's headline is computed from it.
+BUDGET_TABLE = BUDGET_REPORT / "budget_per_instance.csv"
+HEADLINE_BEGIN = ("<!-- headline: written by `python benchmarks/paper_reproduction.py "
+                  "write-budgets` from reports/paper-reproduction/budgets/"
+                  "budget_per_instance.csv -->")
+HEADLINE_END = "<!-- /headline -->"
 #: The exact method whose lower bound brackets the gaps where no method proves J* (8/20 up).
 BOUND_METHOD = "exact-bp"
 
@@ -127,9 +133,105 @@ def run_budgets(args: argparse.Namespace) -> None:
                         **{**common, "budgets": [args.knee]}))
 
 
+def budget_per_instance(frame: pd.DataFrame) -> pd.DataFrame:
+    """The budgeted ok jobs as (mode, scale, instance, method, budget) rows: J the mean over
+    seeds, over_budget the plan calls over budget summed over seeds; what the headline is
+    computed from (committed as ``BUDGET_TABLE``)."""
+    ok = frame[(frame["status"] == "ok") & frame["budget"].notna()]
+    keys = ["mode", "scale", "instance", "method", "budget"]
+    table = ok.groupby(keys).agg(J=("J", "mean"), seeds=("seed", "nunique"),
+                                 over_budget=("over_budget", "sum")).reset_index()
+    return table.sort_values(keys, key=lambda c: c.map(_scale_rank) if c.name == "scale"
+                             else c).reset_index(drop=True)
+
+
+def _scale_rank(scale: str) -> int:
+    return SCALES.index(scale) if scale in SCALES else len(SCALES)
+
+
+def paired_difference(table: pd.DataFrame, first: str, second: str) -> tuple[float, float, int]:
+    """Mean of J(first) - J(second) over the instances both ran, its 95 % half-width and
+    the instance count."""
+    wide = table.pivot_table(index="instance", columns="method", values="J")[[first, second]]
+    diff = (wide[first] - wide[second]).dropna()
+    return float(diff.mean()), normal_half_width(diff.to_numpy()), len(diff)
+
+
+def best_at_each_budget(table: pd.DataFrame, mode: str) -> list[str]:
+    """Per scale and budget, the method of the lowest mean J, with its paired difference to
+    the second (negative: below it)."""
+    lines = ["| scale | budget (s) | best (mean J) | second (mean J) | best - second, 95 % "
+             "interval | instances |", "|---|---:|---|---|---:|---:|"]
+    rows = table[table["mode"] == mode]
+    for (scale, budget), at in sorted(rows.groupby(["scale", "budget"]),
+                                      key=lambda g: (_scale_rank(g[0][0]), g[0][1])):
+        means = at.groupby("method")["J"].mean().sort_values()
+        if len(means) < 2:
+            continue
+        (first, best), (second, runner_up) = list(means.items())[:2]
+        diff, half, count = paired_difference(at, first, second)
+        lines.append(f"| {scale} | {budget:g} | {first} ({best:.2f}) | {second} "
+                     f"({runner_up:.2f}) | {diff:+.2f} [{diff - half:+.2f}, {diff + half:+.2f}]"
+                     f" | {count} |")
+    return lines
+
+
+def budget_headline(table: pd.DataFrame, budget: float) -> list[str]:
+    """The README's headline: dynamic mode at ``budget`` seconds per plan call, median
+    (mean) J per method and scale, methods by mean J at the largest scale."""
+    rows = table[(table["mode"] == "dynamic") & (table["budget"] == budget)]
+    scales = [s for s in SCALES if s in set(rows["scale"])]
+    counts = rows.groupby("scale")["instance"].nunique()
+    stats = rows.groupby(["method", "scale"])["J"].agg(["median", "mean"])
+    order = sorted(rows["method"].unique(),
+                   key=lambda m: stats["mean"].get((m, scales[-1]), float("inf")))
+    lines = ["| method | " + " | ".join(f"{s} ({counts[s]} inst.)" for s in scales) + " |",
+             "|---|" + "---:|" * len(scales)]
+    for method in order:
+        cells = [f"{stats.at[(method, s), 'median']:.1f} ({stats.at[(method, s), 'mean']:.1f})"
+                 if (method, s) in stats.index else "" for s in scales]
+        lines.append(f"| {method} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def headline_block(table: pd.DataFrame) -> list[str]:
+    """The README's generated block: the caption, the headline table at the dynamic runs'
+    budget and the best method at each budget of the static sweep."""
+    dynamic = table[table["mode"] == "dynamic"]
+    budget = float(dynamic["budget"].max())
+    over = int(table["over_budget"].sum())
+    return [
+        f"Dynamic mode, {budget:g} s per plan call for every method (the same budget: the "
+        "equal-budget footing of docs/methods.md, \"Budgets\"), each plan call from the "
+        "committed prefixes alone (`init=empty`) unless the label says `init=incumbent` (the "
+        "plan in force; DGA seeds half its population from it, PyVRP plans from the prefixes), "
+        "`greedy` and `cnp` one pass: median J (mean J), lower is better; "
+        f"{over} plan call(s) of the sweep returned later than budget + 10 % + 50 ms.",
+        "",
+        *budget_headline(table, budget),
+        "",
+        "Static mode, the best method at each budget (mean J over the instances, each the mean "
+        "over its seeds) and its paired difference to the second:",
+        "",
+        *best_at_each_budget(table, "static"),
+    ]
+
+
+def replace_headline(text: str, block: list[str]) -> str:
+    """``text`` (the README) with the lines between the headline markers replaced."""
+    begin, end = text.index(HEADLINE_BEGIN), text.index(HEADLINE_END)
+    return text[:begin + len(HEADLINE_BEGIN)] + "\n" + "\n".join(block) + "\n" + text[end:]
+
+
 def write_budgets(args: argparse.Namespace) -> None:
     del args
     print(write_report(BUDGET_OUT, BUDGET_REPORT))
+    table = budget_per_instance(load(BUDGET_OUT))
+    BUDGET_TABLE.parent.mkdir(parents=True, exist_ok=True)
+    table.to_csv(BUDGET_TABLE, index=False)
+    if (table["mode"] == "dynamic").any():
+        readme = ROOT / "README.md"
+        readme.write_text(replace_headline(readme.read_text(), headline_block(table)))
 
 
 def relative(numerator: float, denominator: float) -> str:

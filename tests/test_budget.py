@@ -149,3 +149,21 @@ def test_solve_prints_the_budget_use_and_calibrate_stores_its_reference(tmp_path
     assert result.exit_code == 0, result.output
     with ResultStore(tmp_path, create=False) as store:
         assert store.meta()["calibration"]["workload"].startswith("one hocf plan call")
+
+
+def test_a_worker_warms_a_method_up_once_before_its_first_budgeted_job(monkeypatch):
+    from tsac_bench.batch import worker
+    from tsac_bench.model.io import instance_to_dict
+
+    calls = []
+    monkeypatch.setattr(worker, "_warmed", set())
+    monkeypatch.setattr("tsac_bench.planning.solve.solve",
+                        lambda *args, **kwargs: calls.append(kwargs.get("budget")))
+    worker.warm_up("hocf", {})
+    worker.warm_up("hocf", {})
+    worker.warm_up("hocf", {"init": "incumbent"})
+    assert calls == [worker.WARM_UP_BUDGET] * 2
+    monkeypatch.undo()
+    spec = {"instance": instance_to_dict(generate("3/6", seed=3)), "method": "greedy",
+            "mode": "static", "seed": 0, "budget": 0.5, "settings": {}}
+    assert worker.execute_job(spec)["status"] == "ok"

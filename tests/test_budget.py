@@ -167,3 +167,30 @@ def test_a_worker_warms_a_method_up_once_before_its_first_budgeted_job(monkeypat
     spec = {"instance": instance_to_dict(generate("3/6", seed=3)), "method": "greedy",
             "mode": "static", "seed": 0, "budget": 0.5, "settings": {}}
     assert worker.execute_job(spec)["status"] == "ok"
+
+
+def test_a_sets_manifest_budgets_add_budgeted_jobs_of_its_heuristics(tmp_path):
+    """instances/quick declares budgets: a run that names none runs its heuristic and
+    learned methods at them too (the main job's small sweep), its exact methods not."""
+    import json
+    import shutil
+
+    from tsac_bench.batch.manifests import read_manifest
+
+    assert read_manifest(QUICK).budgets == [0.1, 0.3]
+    folder = tmp_path / "set"
+    folder.mkdir()
+    shutil.copy(QUICK / "quick-2-4-s1.json", folder)
+    manifest = json.loads((QUICK / "manifest.json").read_text())
+    manifest["instances"] = {"quick-2-4-s1": manifest["instances"]["quick-2-4-s1"]}
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    run_batch(RunConfig([folder], tmp_path / "run", methods=["greedy", "exact", "hocf:samples=2"],
+                        mode="static", jobs=1), progress=False, note=lambda line: None)
+    with ResultStore(tmp_path / "run", create=False) as store:
+        budgets = sorted((row["method"], row["budget"] or 0.0) for row in store.rows())
+    assert budgets == [("exact", 0.0), ("greedy", 0.0), ("greedy", 0.1), ("greedy", 0.3),
+                       ("hocf:samples=2", 0.0)]
+    manifest["budgets"] = [0, "1"]
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    assert read_manifest(folder).problem_lines() == [
+        f"{folder / 'manifest.json'}: budgets: expected a list of seconds > 0, got [0, '1']"]

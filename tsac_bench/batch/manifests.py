@@ -42,6 +42,9 @@ class Manifest:
     entries: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: (field, what is wrong) for each malformed part, in file order.
     problems: list[tuple[str | None, str]] = field(default_factory=list)
+    #: Seconds per plan call at which a run that names no ``--budget`` also runs the set's
+    #: jobs (a small budget sweep in the main job's report); None: none.
+    budgets: list[float] | None = None
 
     def problem_lines(self) -> list[str]:
         return [str(InputError(str(self.path), where, what)) for where, what in self.problems]
@@ -84,6 +87,14 @@ def read_manifest(directory: Path) -> Manifest:
         got = data.get("format") if isinstance(data, dict) else type(data).__name__
         manifest.problems.append(("format", f"expected {MANIFEST_FORMAT!r}, got {got!r}"))
         return manifest
+    budgets = data.get("budgets")
+    if budgets is not None:
+        if (isinstance(budgets, list) and budgets
+                and all(_is_number_or_null(b) and b is not None and b > 0 for b in budgets)):
+            manifest.budgets = sorted({float(b) for b in budgets})
+        else:
+            manifest.problems.append(("budgets", f"expected a list of seconds > 0, got "
+                                                 f"{budgets!r}"))
     entries = data.get("instances")
     if not isinstance(entries, dict):
         manifest.problems.append(("instances", "expected an object keyed by instance name"))
@@ -103,7 +114,10 @@ def read_manifest(directory: Path) -> Manifest:
 
 
 def write_manifest(manifest: Manifest) -> None:
-    data = {"format": MANIFEST_FORMAT, "instances": manifest.entries}
+    data: dict[str, Any] = {"format": MANIFEST_FORMAT}
+    if manifest.budgets is not None:
+        data["budgets"] = manifest.budgets
+    data["instances"] = manifest.entries
     manifest.path.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n")
 
 

@@ -73,6 +73,8 @@ class LoadedInstance:
     data: dict[str, Any]
     instance_set: str
     reference: Reference
+    #: The set's manifest ``budgets``: run too when the run names no budget.
+    set_budgets: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ def load_instances(paths: Sequence[Path]) -> tuple[list[LoadedInstance], list[st
         if not path.exists():
             problems.append(f"{path}: no such file or directory")
     files = iter_instance_files([p for p in paths if p.exists()])
-    manifests: dict[Path, dict[str, Reference]] = {}
+    manifests: dict[Path, tuple[dict[str, Reference], tuple[float, ...]]] = {}
     loaded: list[LoadedInstance] = []
     seen: dict[str, Path] = {}
     for path in files:
@@ -123,10 +125,11 @@ def load_instances(paths: Sequence[Path]) -> tuple[list[LoadedInstance], list[st
             manifest = read_manifest(path.parent)
             if manifest.path.exists():  # a set without a manifest simply has no references
                 problems.extend(manifest.problem_lines())
-            manifests[path.parent] = manifest.references()
-        reference = manifests[path.parent].get(instance.name, Reference())
+            manifests[path.parent] = (manifest.references(), tuple(manifest.budgets or ()))
+        references, set_budgets = manifests[path.parent]
         loaded.append(LoadedInstance(path, instance, instance_to_dict(instance),
-                                     path.parent.name, reference))
+                                     path.parent.name,
+                                     references.get(instance.name, Reference()), set_budgets))
     return loaded, problems
 
 
@@ -171,7 +174,8 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec]
     """One job per (instance, method spec, mode, seed, budget). A job's ``method`` in the
     store is the spec's label (the name alone without settings, so stores of plain names
     resume). With ``budgets`` each plan call has a budget's seconds (its time limit: an
-    anytime method spends them, ``tsac_bench.planning.budget``); without, the time limit."""
+    anytime method spends them, ``tsac_bench.planning.budget``); without, the time limit,
+    and the budgets its set's manifest declares too."""
     jobs = []
     for loaded in instances:
         instance = loaded.instance
@@ -182,7 +186,7 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec]
             # A method that plans only some modes gets no job in the others (not a failure).
             for mode, seed, budget in itertools.product(
                     [m for m in modes if m in modes_of_method], range(seeds),
-                    budgets or [None]):
+                    budgets or [None, *set_budgets(loaded, method)]):
                 key = job_key(instance.name, method.label, mode, seed, budget)
                 limit = own_limit if budget is None else budget
                 spec = {"key": key, "instance": loaded.data, "instance_file": str(loaded.path),
@@ -203,6 +207,19 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec]
     # Longest jobs first: a slow exact job started last would leave the other cores idle.
     jobs.sort(key=lambda j: -(hard_timeout(j.spec) or float("inf")))
     return jobs
+
+
+def set_budgets(loaded: LoadedInstance, method: MethodSpec) -> tuple[float, ...]:
+    """The budgets of ``loaded``'s set that ``method`` runs at when the run names none: all
+    of them for a heuristic or learned method whose settings a budget leaves as they are,
+    none for an exact method (its proof is what it is run for) or a spec with a work cap."""
+    if not loaded.set_budgets or is_exact_method(method.name):
+        return ()
+    try:
+        budgeted_settings(method.name, allocator_class(method.name), method.settings)
+    except TsacBenchError:
+        return ()
+    return loaded.set_budgets
 
 
 # --- recording ---------------------------------------------------------------------------

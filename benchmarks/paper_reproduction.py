@@ -351,14 +351,16 @@ def gap_brackets(frame: pd.DataFrame, table: pd.DataFrame) -> list[str]:
 
 
 def headline_brackets(ran: pd.DataFrame) -> list[str]:
-    """The brackets' medians in the shape of the README's headline table (dynamic mode: one
+    """The brackets' medians in the shape of the README's one-game table (dynamic mode: one
     row per method, one column per scale)."""
     dynamic = ran[ran["mode"] == "dynamic"]
     scales = [s for s in SCALES if s in set(dynamic["scale"])]
     counts = dynamic.groupby("scale")["instance"].nunique()
-    lines = ["Dynamic mode, in the shape of the README's headline table: the median gap to J* "
-             "lies between the two numbers (one number: J* proven on every instance; "
-             "\"no bound\": only the lower end is known).", "",
+    lines = ["Dynamic mode, in the shape of the README's one-game table: the median gap to J* "
+             "lies between the two numbers (one number: the two medians are equal, which "
+             "happens where the instances they fall on have J* proven; J* need not be proven "
+             "on every instance, see \"proved N of M\" above; \"no bound\": only the lower "
+             "end is known).", "",
              "| method | " + " | ".join(f"{s} ({counts[s]} inst.)" for s in scales) + " |",
              "|---|" + "---:|" * len(scales)]
     for method, rows in sorted(dynamic.groupby("method")):

@@ -53,3 +53,29 @@ def test_headline_brackets_take_each_end_s_median_and_need_every_bound() -> None
     assert lines[2] == "| method | 4/10 (3 inst.) | 8/20 (2 inst.) |"
     assert lines[4] == "| dga | 20.0% - 50.0% | >= 20.0% (no bound) |"
     assert lines[5] == "| hocf | 100.0% |  |"
+
+
+def budget_rows() -> pd.DataFrame:
+    def row(mode: str, budget: float, method: str, instance: str, J: float) -> dict:
+        return {"mode": mode, "scale": "4/10", "instance": instance, "method": method,
+                "budget": budget, "J": J, "seeds": 1, "over_budget": 0}
+
+    costs = {("static", 1.0, "a"): (10.0, 12.0), ("static", 1.0, "b"): (11.0, 14.0),
+             ("dynamic", 0.3, "a"): (20.0, 30.0), ("dynamic", 0.3, "b"): (25.0, 26.0)}
+    return pd.DataFrame([row(mode, budget, method, f"i{k}", J)
+                         for (mode, budget, method), pair in costs.items()
+                         for k, J in enumerate(pair)])
+
+
+def test_the_best_at_each_budget_with_its_paired_interval() -> None:
+    # a - b per instance: -1, -2; mean -1.5, half-width 1.96 * 0.7071 / sqrt(2) = 0.98.
+    assert paper_reproduction.best_at_each_budget(budget_rows(), "static")[2:] == [
+        "| 4/10 | 1 | a (11.00) | b (12.50) | -1.50 [-2.48, -0.52] | 2 |"]
+
+
+def test_the_budget_headline_gives_median_and_mean_at_the_dynamic_budget() -> None:
+    assert paper_reproduction.budget_headline(budget_rows(), 0.3) == [
+        "| method | 4/10 (2 inst.) |", "|---|---:|", "| a | 25.0 (25.0) |", "| b | 25.5 (25.5) |"]
+    text = f"x\n{paper_reproduction.HEADLINE_BEGIN}\nold\n{paper_reproduction.HEADLINE_END}\ny"
+    assert paper_reproduction.replace_headline(text, ["new"]) == (
+        f"x\n{paper_reproduction.HEADLINE_BEGIN}\nnew\n{paper_reproduction.HEADLINE_END}\ny")

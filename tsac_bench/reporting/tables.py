@@ -186,51 +186,33 @@ def latex_table(table: pd.DataFrame, mode: str) -> str:
     width = 2 + len(SUMMARY_CELLS) + 2
     first = 3 + len(J_CELLS)
     head = [
-        r"\toprule",
         rf"Method & $n$ & \multicolumn{{{len(J_CELLS)}}}{{c}}{{$J$}} & "
         rf"\multicolumn{{{len(GAP_CELLS)}}}{{c}}{{Gap to $J^*$ (\%)}} & $n_{{J^*}}$ & "
         r"Failed \\",
         rf"\cmidrule(lr){{3-{first - 1}}}\cmidrule(lr){{{first}-{first + len(GAP_CELLS) - 1}}}",
         " & ".join(["", "", *[c.latex for c in SUMMARY_CELLS], "", ""]) + r" \\",
-        r"\midrule",
     ]
-    lines = [
-        r"\begingroup",
-        r"\footnotesize",  # ten columns within the 345 pt text width (tests/report)
-        r"\setlength{\tabcolsep}{3pt}",
-        r"\begin{longtable}{l" + "r" * (width - 1) + "}",
-        rf"\caption{{Total cost $J$ per scale $N/M$ ($N$ AAVs, $M$ tasks) and method, {mode} "
-        r"mode: mean, standard deviation and median over the instances, and gaps to the "
-        r"exact optimum $J^*$.}",
-        rf"\label{{tab:tsac-bench-{mode}}} \\",
-        *head,
-        r"\endfirsthead",
-        rf"\multicolumn{{{width}}}{{l}}{{\emph{{Table \thetable, continued}}}} \\",
-        *head,
-        r"\endhead",
-        r"\midrule",
-        rf"\multicolumn{{{width}}}{{r}}{{\emph{{continued on the next page}}}} \\",
-        r"\endfoot",
-        r"\bottomrule",
-        r"\endlastfoot",
-    ]
+    body: list[str] = []
     previous = None
     for i, row in rows.iterrows():
         if row["scale"] != previous:
             if previous is not None:
-                lines.append(r"\midrule")
-            lines.append(rf"\multicolumn{{{width}}}{{l}}{{$N/M$ = "
-                         rf"{latex_escape(str(row['scale']))}}} \\")
+                body.append(r"\midrule")
+            body.append(rf"\multicolumn{{{width}}}{{l}}{{$N/M$ = "
+                        rf"{latex_escape(str(row['scale']))}}} \\")
             previous = row["scale"]
         cells = [latex_escape(str(row["method"])), str(row["instances"])]
         for cell in SUMMARY_CELLS:
             text = _fmt(row[cell.column], cell.digits, cell.percent)
             cells.append(rf"\textbf{{{text}}}" if bold.at[i, cell.column] else text)
         cells += [str(int(row["gap_n"])), str(int(row["failed"]))]
-        lines.append(" & ".join(cells) + r" \\")
-    lines += [r"\end{longtable}", r"\endgroup", "",
-              r"\noindent{\footnotesize " + GAP_NOTE_LATEX + r"\par}", ""]
-    return "\n".join(lines)
+        body.append(" & ".join(cells) + r" \\")
+    # Ten columns within the 345 pt text width (tests/report).
+    caption = (rf"Total cost $J$ per scale $N/M$ ($N$ AAVs, $M$ tasks) and method, {mode} "
+               r"mode: mean, standard deviation and median over the instances, and gaps to the "
+               r"exact optimum $J^*$.")
+    return _longtable("l" + "r" * (width - 1), head, caption, f"tab:tsac-bench-{mode}", body,
+                      GAP_NOTE_LATEX)
 
 
 def markdown_table(table: pd.DataFrame, mode: str) -> str:

@@ -202,16 +202,23 @@ def headline_block(table: pd.DataFrame) -> list[str]:
     over = int(table["over_budget"].sum())
     return [
         f"Dynamic mode, {budget:g} s per plan call for every method (the same budget: the "
-        "equal-budget footing of docs/methods.md, \"Budgets\"), each plan call from the "
+        "equal-budget footing of docs/methods.md, \"Budgets\"), the first instances by seed "
+        "of `instances/paper-mc/`, one seed, each plan call from the "
         "committed prefixes alone (`init=empty`) unless the label says `init=incumbent` (the "
         "plan in force; DGA seeds half its population from it, PyVRP plans from the prefixes), "
         "`greedy` and `cnp` one pass: median J (mean J), lower is better; "
-        f"{over} plan call(s) of the sweep returned later than budget + 10 % + 50 ms.",
+        f"{over} plan call(s) of the sweep (static and dynamic) returned later than budget + "
+        "10 % + 50 ms.",
         "",
         *budget_headline(table, budget),
         "",
+        "The best method at each scale, its paired difference to the second:",
+        "",
+        *best_at_each_budget(table, "dynamic"),
+        "",
         "Static mode, the best method at each budget (mean J over the instances, each the mean "
-        "over its seeds) and its paired difference to the second:",
+        "over its 3 seeds, one seed of `greedy` and `cnp`) and its paired difference to the "
+        "second:",
         "",
         *best_at_each_budget(table, "static"),
     ]

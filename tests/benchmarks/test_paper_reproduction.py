@@ -79,3 +79,14 @@ def test_the_budget_headline_gives_median_and_mean_at_the_dynamic_budget() -> No
     text = f"x\n{paper_reproduction.HEADLINE_BEGIN}\nold\n{paper_reproduction.HEADLINE_END}\ny"
     assert paper_reproduction.replace_headline(text, ["new"]) == (
         f"x\n{paper_reproduction.HEADLINE_BEGIN}\nnew\n{paper_reproduction.HEADLINE_END}\ny")
+
+
+def test_the_readme_headline_is_the_committed_equal_budget_data() -> None:
+    """Every number of the README's headline block is written by `write-budgets` from the
+    committed per-instance table: edit one and this fails."""
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    begin = readme.index(paper_reproduction.HEADLINE_BEGIN) + len(
+        paper_reproduction.HEADLINE_BEGIN)
+    block = readme[begin:readme.index(paper_reproduction.HEADLINE_END)].strip("\n")
+    table = pd.read_csv(paper_reproduction.BUDGET_TABLE)
+    assert block.split("\n") == paper_reproduction.headline_block(table)

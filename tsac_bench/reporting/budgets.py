@@ -39,11 +39,11 @@ from tsac_bench.batch.store import OK
 from tsac_bench.planning import allocator_class, parse_method_spec
 from tsac_bench.planning.budget import TIME_LIMIT, budget_use
 from tsac_bench.reporting.data import (
-    method_label,
     ordered_modes,
     per_instance,
     replan_records,
     scale_order,
+    series_labels,
 )
 from tsac_bench.reporting.stats import comparisons, normal_half_width
 
@@ -75,12 +75,11 @@ def plan_calls(stats: Any, mode: str) -> int:
 
 def _series(jobs: pd.DataFrame) -> pd.DataFrame:
     """Each budgeted series (``data.method_label``) with its method and budget."""
-    labels = [method_label(m, b) for m, b in zip(jobs["method"], jobs["budget"], strict=True)]
-    return (jobs.assign(series=labels)[["series", "method", "budget"]]
+    return (jobs.assign(series=series_labels(jobs))[["series", "method", "budget"]]
             .drop_duplicates("series").set_index("series"))
 
 
-def _budgeted_instances(frame: pd.DataFrame) -> pd.DataFrame:
+def budgeted_instances(frame: pd.DataFrame) -> pd.DataFrame:
     """``data.per_instance`` rows of the budgeted series, with ``method`` the method's label
     again, ``series`` its label at the budget and ``budget``."""
     jobs = budgeted(frame)
@@ -105,8 +104,7 @@ def budget_table(frame: pd.DataFrame) -> pd.DataFrame:
     calls = pd.Series([plan_calls(s, m) for s, m in zip(jobs["stats"], jobs["mode"],
                                                          strict=True)], index=jobs.index)
     jobs = jobs.assign(
-        series=[method_label(m, b) for m, b in zip(jobs["method"], jobs["budget"],
-                                                   strict=True)],
+        series=series_labels(jobs),
         failed=~ok, timed_calls=calls.where(timed, 0), ok_calls=calls.where(ok, 0),
         ok_runtime=jobs["runtime"].where(ok, 0.0))
     keys = ["mode", "scale", "series"]
@@ -117,7 +115,7 @@ def budget_table(frame: pd.DataFrame) -> pd.DataFrame:
         ok_runtime=("ok_runtime", "sum"))
     table["seconds_per_call"] = table["ok_runtime"] / table["ok_calls"].where(
         table["ok_calls"] > 0)
-    means = _budgeted_instances(frame).groupby(keys)["J"].agg(
+    means = budgeted_instances(frame).groupby(keys)["J"].agg(
         instances="size", J_mean="mean", J_median="median")
     table = table.join(means).reset_index()
     table["instances"] = table["instances"].fillna(0).astype(int)
@@ -134,6 +132,14 @@ def budget_table(frame: pd.DataFrame) -> pd.DataFrame:
     return table[columns].reset_index(drop=True)
 
 
+def paired_difference(rows: pd.DataFrame, first: str, second: str) -> tuple[float, float, int]:
+    """Per-instance rows (``instance``, ``method``, ``J``): the mean of J(first) - J(second)
+    over the instances both have, its 95 % normal half-width and the instance count."""
+    wide = rows.pivot_table(index="instance", columns="method", values="J")
+    diff = (wide[first] - wide[second]).dropna()
+    return float(diff.mean()), normal_half_width(diff.to_numpy()), len(diff)
+
+
 def paired_tests(frame: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
     """Per (mode, scale, budget) of ``budget_table``: its two lowest mean J compared on the
     instances both solved; ``best`` has the lower mean J there, ``diff_mean`` is the mean of
@@ -142,8 +148,7 @@ def paired_tests(frame: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
     columns = ["mode", "scale", "budget", "best", "second", "instances", "diff_mean",
                "diff_half_width", "p"]
     jobs = budgeted(frame)
-    jobs = jobs.assign(series=[method_label(m, b) for m, b in zip(
-        jobs["method"], jobs["budget"], strict=True)])
+    jobs = jobs.assign(series=series_labels(jobs))
     rows = []
     for (mode, scale, budget), group in table.groupby(["mode", "scale", "budget"],
                                                       sort=False):
@@ -156,13 +161,11 @@ def paired_tests(frame: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
         if best is None:
             continue
         second = next(s for s in two["series"] if s != best)
-        wide = per_instance(pair).pivot(index="instance", columns="method", values="J")
-        diff = (wide[second] - wide[best]).dropna()
+        diff_mean, half_width, _ = paired_difference(per_instance(pair), second, best)
         method = two.set_index("series")["method"]
         rows.append({"mode": mode, "scale": scale, "budget": budget, "best": method[best],
-                     "second": method[second], "instances": n,
-                     "diff_mean": float(diff.mean()),
-                     "diff_half_width": normal_half_width(diff.to_numpy()),
+                     "second": method[second], "instances": n, "diff_mean": diff_mean,
+                     "diff_half_width": half_width,
                      "p": float(result.set_index("method").at[second, "p"])})
     return pd.DataFrame(rows, columns=columns)
 
@@ -170,7 +173,7 @@ def paired_tests(frame: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
 def budget_curves(frame: pd.DataFrame) -> pd.DataFrame:
     """Per (mode, scale, method, budget): the quartiles of J over the instances (``q1``,
     ``median``, ``q3``), the data of the figure of J against budget."""
-    rows = _budgeted_instances(frame)
+    rows = budgeted_instances(frame)
     columns = ["mode", "scale", "method", "budget", "q1", "median", "q3"]
     if rows.empty:
         return pd.DataFrame(columns=columns)

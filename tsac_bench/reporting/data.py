@@ -55,15 +55,20 @@ def method_label(method: str, budget: float | None) -> str:
     return f"{method} @ {seconds_text(budget)}"
 
 
+def series_labels(frame: pd.DataFrame) -> pd.Series:
+    """Each job's series (``method_label`` of its method and budget), on ``frame``'s index."""
+    return pd.Series([method_label(m, b) for m, b in zip(frame["method"], frame["budget"],
+                                                          strict=True)],
+                     index=frame.index, dtype=object)
+
+
 def by_series(frame: pd.DataFrame) -> pd.DataFrame:
     """``frame`` with each job's ``method`` replaced by its series (``method_label``) and no
     ``budget`` column, which the label now carries (so a second call changes nothing); a frame
     without one (hand-made, or read from an old export) as it is."""
     if "budget" not in frame.columns:
         return frame
-    labels = [method_label(m, b) for m, b in zip(frame["method"], frame["budget"], strict=True)]
-    return frame.assign(method=pd.Series(labels, index=frame.index, dtype=object)).drop(
-        columns="budget")
+    return frame.assign(method=series_labels(frame)).drop(columns="budget")
 
 
 def scale_order(scales: Sequence[str]) -> list[str]:

@@ -38,9 +38,10 @@ import pandas as pd
 
 from tsac_bench.batch.runner import RunConfig, run_batch
 from tsac_bench.planning import is_exact_method
+from tsac_bench.reporting.budgets import budgeted_instances, paired_difference
 from tsac_bench.reporting.data import load, per_instance, scale_order
 from tsac_bench.reporting.report import write_report
-from tsac_bench.reporting.stats import gap_measures, normal_half_width
+from tsac_bench.reporting.stats import gap_measures
 
 ROOT = Path(__file__).resolve().parent.parent
 SETS = ROOT / "instances" / "paper-mc"
@@ -135,26 +136,16 @@ def run_budgets(args: argparse.Namespace) -> None:
 
 def budget_per_instance(frame: pd.DataFrame) -> pd.DataFrame:
     """The budgeted ok jobs as (mode, scale, instance, method, budget) rows: J the mean over
-    seeds, over_budget the plan calls over budget summed over seeds; what the headline is
-    computed from (committed as ``BUDGET_TABLE``)."""
-    ok = frame[(frame["status"] == "ok") & frame["budget"].notna()]
+    seeds (``budgets.budgeted_instances``), over_budget the plan calls over budget summed
+    over seeds; what the headline is computed from (committed as ``BUDGET_TABLE``)."""
     keys = ["mode", "scale", "instance", "method", "budget"]
-    table = ok.groupby(keys).agg(J=("J", "mean"), seeds=("seed", "nunique"),
-                                 over_budget=("over_budget", "sum")).reset_index()
-    return table.sort_values(keys, key=lambda c: c.map(_scale_rank) if c.name == "scale"
+    rows = budgeted_instances(frame)
+    ok = frame[(frame["status"] == "ok") & frame["budget"].notna()]
+    over = ok.groupby(keys)["over_budget"].sum().rename("over_budget")
+    table = rows[[*keys, "J", "seeds"]].merge(over, left_on=keys, right_index=True)
+    scales = {s: i for i, s in enumerate(scale_order(table["scale"]))}
+    return table.sort_values(keys, key=lambda c: c.map(scales) if c.name == "scale"
                              else c).reset_index(drop=True)
-
-
-def _scale_rank(scale: str) -> int:
-    return SCALES.index(scale) if scale in SCALES else len(SCALES)
-
-
-def paired_difference(table: pd.DataFrame, first: str, second: str) -> tuple[float, float, int]:
-    """Mean of J(first) - J(second) over the instances both ran, its 95 % half-width and
-    the instance count."""
-    wide = table.pivot_table(index="instance", columns="method", values="J")[[first, second]]
-    diff = (wide[first] - wide[second]).dropna()
-    return float(diff.mean()), normal_half_width(diff.to_numpy()), len(diff)
 
 
 def best_at_each_budget(table: pd.DataFrame, mode: str) -> list[str]:
@@ -163,8 +154,9 @@ def best_at_each_budget(table: pd.DataFrame, mode: str) -> list[str]:
     lines = ["| scale | budget (s) | best (mean J) | second (mean J) | best - second, 95 % "
              "interval | instances |", "|---|---:|---|---|---:|---:|"]
     rows = table[table["mode"] == mode]
+    scales = scale_order(rows["scale"])
     for (scale, budget), at in sorted(rows.groupby(["scale", "budget"]),
-                                      key=lambda g: (_scale_rank(g[0][0]), g[0][1])):
+                                      key=lambda g: (scales.index(g[0][0]), g[0][1])):
         means = at.groupby("method")["J"].mean().sort_values()
         if len(means) < 2:
             continue
@@ -202,7 +194,8 @@ def headline_block(table: pd.DataFrame) -> list[str]:
     over = int(table["over_budget"].sum())
     return [
         f"Dynamic mode, {budget:g} s per plan call for every method (the same budget: the "
-        "equal-budget footing of docs/methods.md, \"Budgets\"), the first instances by seed "
+        "equal-budget footing of docs/methods.md, \"Budgets\", where the knee of a static "
+        "sweep on validation instances chose it), the first instances by seed "
         "of `instances/paper-mc/`, one seed, each plan call from the "
         "committed prefixes alone (`init=empty`) unless the label says `init=incumbent` (the "
         "plan in force; DGA seeds half its population from it, PyVRP plans from the prefixes), "

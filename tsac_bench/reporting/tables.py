@@ -436,8 +436,14 @@ def budget_footing(rows: pd.DataFrame, calibration: dict[str, Any] | None) -> st
                  f"(measured {calibration.get('measured_at', '?')})")
     else:
         text += " (no calibration recorded: seconds of the machines that ran the jobs)"
-    text += (". Every method plans from the committed prefixes, with the same budget per "
-             "plan call (see docs/methods.md).")
+    text += ". Every method gets the same budget per plan call"
+    if (rows["mode"] == "dynamic").any():
+        # The starts differ at a re-plan, and a comparison must say how.
+        text += (" and plans from the committed prefixes, except that DGA seeds half its "
+                 "population from the plan in force and a label with init=incumbent starts "
+                 "from it (see docs/methods.md, \"Budgets\").")
+    else:
+        text += " and plans from the committed prefixes, none in static mode (see docs/methods.md)."
     one_pass = sorted(rows.loc[rows["use"] == ONE_PASS, "method"].unique())
     if one_pass:
         text += (f" One pass (builds one plan and stops; the budget only caps it): "

@@ -286,6 +286,9 @@ def test_the_report_has_a_cost_against_budget_section(run_dir, tmp_path):
     dynamic = index[index.index("## Dynamic mode"):]
     assert "### Cost against budget" in dynamic and "Primal integral" not in dynamic
     assert "own stopping rule" not in dynamic
+    assert "none in static mode" in static and "none in static mode" not in dynamic
+    assert ("except that DGA seeds half its population from the plan in force and a label "
+            "with init=incumbent starts from it") in dynamic
     assert "- budgets per plan call: 0.5 s (2 ref. units), 2 s (8 ref. units)" in index
     for name in ("budget-static.md", "budget-static.tex", "budget-static.csv",
                  "budget-tests-static.csv", "budget-dynamic.tex", "primal-static.md",

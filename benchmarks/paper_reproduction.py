@@ -129,9 +129,12 @@ def run_budgets(args: argparse.Namespace) -> None:
     if args.knee is None:
         return
     warm = [f"{m}:init=incumbent" for m in OCF_METHODS if m in present]
-    files = [f for scale in SCALES for f in instance_files(scale, args.dynamic_per_scale)]
-    run_batch(RunConfig(files, BUDGET_OUT, methods=[*heuristics, *warm], mode="dynamic",
-                        **{**common, "budgets": [args.knee]}))
+    # In chunks too, so that a run stopped between sessions leaves whole instances done.
+    for first in range(0, args.dynamic_per_scale, args.chunk):
+        last = min(first + args.chunk, args.dynamic_per_scale)
+        files = [f for scale in SCALES for f in instance_files(scale, last)[first:]]
+        run_batch(RunConfig(files, BUDGET_OUT, methods=[*heuristics, *warm], mode="dynamic",
+                            **{**common, "budgets": [args.knee]}))
 
 
 def budget_per_instance(frame: pd.DataFrame) -> pd.DataFrame:

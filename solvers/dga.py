@@ -357,7 +357,7 @@ class DGAAllocator(Settings):
              time_limit: float | None = None) -> PlanResult:
         require_a_stop(self.name, "generations", time_limit, self.generations,
                        self.evaluations)
-        stop = WorkStop(time_limit, self.evaluations)
+        stop = WorkStop(time_limit, self.evaluations, look_ahead=True)
         trace = IncumbentTrace(stop.began)
         rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(self.islands)]
         populations: list[list[Individual] | None] = [None] * self.islands

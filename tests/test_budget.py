@@ -54,6 +54,16 @@ def test_work_stop_counts_units_and_reads_the_clock():
     assert WorkStop(None, None).reached() is None
 
 
+def test_work_stop_with_look_ahead_starts_no_unit_the_mean_unit_would_overrun(monkeypatch):
+    clock = iter([0.0, 0.7, 0.7, 0.7])
+    monkeypatch.setattr(time, "perf_counter", lambda: next(clock))
+    careful, plain = WorkStop(1.0, None, look_ahead=True), WorkStop(1.0, None, began=0.0)
+    careful.done()
+    plain.done()
+    # 0.7 s for the first unit: the second would end at 1.4 s, past the 1 s deadline.
+    assert careful.reached() == "time-limit" and plain.reached() is None
+
+
 def test_incumbent_trace_keeps_strict_improvements_only():
     trace = IncumbentTrace(began=10.0)
     assert trace.offer(5.0, at=10.5) and not trace.offer(5.0, at=11.0)

@@ -293,6 +293,13 @@ def test_resuming_jobs_recorded_with_other_settings_says_so_and_keeps_them(tmp_p
     run_batch(config, note=notes.append, progress=False)
     again = run_batch(config, note=notes.append, progress=False)
     assert again.ran == 0 and not any("other settings" in line for line in notes)
+    # Budgeted jobs record the work caps their budget lifts (hocf's samples=None): resuming
+    # them compares with those, not with the unbudgeted defaults.
+    budgeted = RunConfig([two_instances], tmp_path / "budgeted", methods=["hocf"],
+                         mode="static", jobs=1, budgets=[0.05])
+    run_batch(budgeted, note=notes.append, progress=False)
+    assert run_batch(budgeted, note=notes.append, progress=False).ran == 0
+    assert not any("other settings" in line for line in notes)
     # A store from before a default changed: one hocf job recorded another c_max and a
     # setting hocf no longer has.
     with sqlite3.connect(out / "results.sqlite") as db:

@@ -372,13 +372,19 @@ def changed_settings(rows: Iterable[dict[str, Any]], methods: Sequence[MethodSpe
     keeps those results, so the store would mix two versions of the method unnoticed."""
     today = {}
     for method in methods:
-        try:
-            today[method.label] = recorded_settings(make_allocator(method))
-        except Exception:  # a method that cannot be built fails in its own jobs, not here
-            continue
+        for budgeted in (False, True):
+            try:
+                # A budgeted job records the settings with the work caps its budget lifts.
+                spec = MethodSpec(method.name, budgeted_settings(
+                    method.name, allocator_class(method.name), method.settings)
+                ) if budgeted else method
+                today[method.label, budgeted] = recorded_settings(make_allocator(spec))
+            except Exception:  # a method that cannot be built fails in its own jobs
+                continue
     changed: dict[str, tuple[int, set[str]]] = {}
     for row in rows:
-        recorded, now = row["settings"], today.get(row["method"])
+        recorded = row["settings"]
+        now = today.get((row["method"], row.get("budget") is not None))
         # Stores from before settings were recorded say nothing either way.
         if row["key"] not in keys or row["status"] != OK or not recorded or now is None:
             continue

@@ -23,11 +23,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from exact_root_bounds import root_bound
 
-from tsac_bench.formulations.branch_price import BranchPrice
+from tsac_bench.formulations.branch_price import BranchPrice, BranchPriceOptions
 from tsac_bench.model.io import read_instance
 
 ROOT = Path(__file__).resolve().parent.parent
 REGRESSION = ROOT / "instances" / "regression"
+
+
+def _root(instance, **options) -> dict[str, float]:
+    """exact-bp's root with ``options`` (BranchPriceOptions fields), the others default."""
+    return BranchPrice(instance, options=BranchPriceOptions(**options)).root()
 
 
 def main(argv: list[str]) -> None:
@@ -46,13 +51,12 @@ def main(argv: list[str]) -> None:
         instance = read_instance(REGRESSION / entry["file"])
         J_star = entry["J_star"]
         milp = [root_bound(instance, v, 0)[0] for v in ("big-M", "time flow", "default")]
-        plain = BranchPrice(instance, closer_rows=False, cover_cuts=False,
-                            goods_time_rows=False, arrival_cut_rounds=0).root()
-        closer = BranchPrice(instance, cover_cuts=False, goods_time_rows=False,
-                             arrival_cut_rounds=0).root()
-        cuts = BranchPrice(instance, goods_time_rows=False, arrival_cut_rounds=0).root()
-        goods = BranchPrice(instance, arrival_cut_rounds=0).root()
-        full = BranchPrice(instance).root()
+        plain = _root(instance, closer_rows=False, cover_cuts=False, goods_time_rows=False,
+                      arrival_cut_rounds=0)
+        closer = _root(instance, cover_cuts=False, goods_time_rows=False, arrival_cut_rounds=0)
+        cuts = _root(instance, goods_time_rows=False, arrival_cut_rounds=0)
+        goods = _root(instance, arrival_cut_rounds=0)
+        full = _root(instance)
         bounds = [*milp, plain["lp"], closer["lp"], cuts["lp"], goods["lp"], full["lp"]]
         row = (f"| {name} | {J_star:.4f} | "
                + " | ".join(f"{100 * b / J_star:.1f}" for b in bounds)

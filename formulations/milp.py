@@ -1,4 +1,4 @@
-"""The exact MILP of Problem 1 (MODEL.md) in Pyomo, solved by HiGHS.
+"""The exact MILP of Problem 1 (docs/model.md) in Pyomo, solved by HiGHS.
 
 ``build_milp`` returns a ``pyomo.ConcreteModel`` (nothing is solved there); ``solve_milp``
 runs HiGHS on it; ``decode`` reads the routes back; ``warm_start`` loads a solution into the
@@ -8,26 +8,25 @@ model with objective J). docs/formulations.md states every constraint and big-M.
 The model searches canonical solutions (formulations/network.py): per AAV a path from its
 start through task visits, each arc direct or through one depot, closed by an uncharged
 final depot visit. Its objective equals J of the decoded solution exactly: C_load, C_time and
-C_op are linear in the variables at every integer point.
+C_op are linear in the variables at every integer point. ``build_milp`` only composes the
+blocks of formulations/milp_blocks.py, one per constraint family.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
+from tsac_bench.formulations import milp_blocks as blocks
+from tsac_bench.formulations.milp_blocks import MilpData
 from tsac_bench.formulations.network import (
     DIRECT,
     START,
-    AavNetwork,
-    Prefix,
     aav_network,
     canonical_routes,
-    coalition_cover_cuts,
     first_task,
     identical_groups,
     late_committed,
@@ -49,22 +48,6 @@ class MilpOptions:
     cover_cuts: bool = True  # a large task needs particular AAVs in full
 
 
-@dataclass
-class MilpData:
-    """What decoding and warm-starting need besides the Pyomo variables."""
-
-    instance: Instance
-    tasks: list[int]
-    networks: list[AavNetwork]
-    prefixes: list[Prefix]
-    late: set[tuple[int, int]]
-    constant: float  # cost of tasks outside the model (not visible): w1 + w2 each
-    committed: tuple[Route, ...] = ()  # the prefixes, stamps included
-    plan_time: float = 0.0  # when the free visits are planned (a dynamic re-plan's t_e)
-    range_aavs: set[int] = field(default_factory=set)  # AAVs whose Dcum the model tracks
-    over_range: dict[tuple[int, int], int | None] = field(default_factory=dict)  # fixed o
-
-
 def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
                committed: Sequence[Route] | None = None,
                options: MilpOptions | None = None, plan_time: float = 0.0) -> Any:
@@ -73,19 +56,44 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
     leaves its anchor no earlier). Returns the model; ``model.data`` is a MilpData."""
     import pyomo.environ as pyo
 
+    options = options or MilpOptions()
+    data = milp_data(instance, tasks, committed, plan_time)
+    index = blocks.MilpIndex.of(data)
+    model = pyo.ConcreteModel(name=f"tsac-milp[{instance.name}]")
+    model.data = data
+    blocks.add_variables(model, data, index)
+    blocks.add_flow_conservation(model, data, index)
+    blocks.add_amounts(model, data, index)
+    blocks.add_time_windows(model, data, index)
+    if options.time_flow:
+        blocks.add_time_flow(model, data, index)
+    blocks.add_loads(model, data, index)
+    if options.capacity_cuts:
+        blocks.add_capacity_cuts(model, data, index)
+    op_cost = blocks.add_range(model, data, index, options.range_time_link)
+    blocks.add_coalition_time(model, data, index)
+    if options.cover_cuts:
+        blocks.add_cover_cuts(model, data, index)
+    blocks.fix_prefixes(model, data, index)
+    if options.symmetry:
+        blocks.add_symmetry(model, data)
+    blocks.add_objective(model, data, op_cost)
+    return model
+
+
+def milp_data(instance: Instance, tasks: Sequence[int] | None,
+              committed: Sequence[Route] | None, plan_time: float) -> MilpData:
+    """The tasks of the model (``tasks`` and every committed one), the prefixes and each
+    AAV's network: the arcs that time windows, reachability and depot dominance leave."""
     from tsac_bench.planning import PlanningState
 
-    options = options or MilpOptions()
-    n_aavs = instance.n_aavs
-    committed = tuple(committed) if committed else tuple(() for _ in range(n_aavs))
+    committed = tuple(committed) if committed else tuple(() for _ in range(instance.n_aavs))
     moment = PlanningState(instance, plan_time, frozenset(), committed)
     prefixes = [parse_prefix(instance, p) for p in committed]
     in_prefix = {m for p in prefixes for _, m, _, _ in p.steps}
     chosen = sorted(set(range(instance.n_tasks) if tasks is None else tasks) | in_prefix)
-    late = late_committed(instance, committed)
     networks = []
-    for n in range(n_aavs):
-        prefix = prefixes[n]
+    for n, prefix in enumerate(prefixes):
         required = [(i, j, k) for i, j, k, _ in prefix.steps]
         trailing = None if prefix.trailing_depot is None else (prefix.last,
                                                                  prefix.trailing_depot)
@@ -94,330 +102,9 @@ def build_milp(instance: Instance, tasks: Sequence[int] | None = None,
         networks.append(aav_network(instance, n, chosen, prefix_arrivals(
             instance, n, committed[n]), required, trailing, prefix.last,
             moment.anchor(n).time))
-    w1, w2, w3 = instance.weights
-    horizon = instance.horizon
-    e_base = instance.e_base
-    data = MilpData(instance, chosen, networks, prefixes, late,
+    return MilpData(instance, chosen, networks, prefixes, late_committed(instance, committed),
                     constant=instance.unserved_task_cost * (instance.n_tasks - len(chosen)),
                     committed=committed, plan_time=plan_time)
-
-    model = pyo.ConcreteModel(name=f"tsac-milp[{instance.name}]")
-    model.data = data
-    visits = [(n, j) for n, net in enumerate(networks) for j in net.tasks]
-    arcs = [(n, a.tail, a.head, a.mode) for n, net in enumerate(networks) for a in net.arcs]
-    arc_of = {(n, a.tail, a.head, a.mode): a for n, net in enumerate(networks)
-              for a in net.arcs}
-    ends = [(n, i) for n, net in enumerate(networks) for i in [START, *net.tasks]]
-    model.V = pyo.Set(initialize=visits, dimen=2, ordered=True)
-    model.A = pyo.Set(initialize=arcs, dimen=4, ordered=True)
-    model.E = pyo.Set(initialize=ends, dimen=2, ordered=True)
-    model.T = pyo.Set(initialize=chosen, ordered=True)
-
-    def cap(n: int) -> int:
-        return instance.aavs[n].capacity
-
-    committed_amount = {(n, j): a for n, p in enumerate(prefixes) for _, j, _, a in p.steps}
-
-    def upper_amount(n: int, j: int) -> int:
-        # A committed amount may exceed the demand (wasteful, legal); it is fixed as flown.
-        return max(min(cap(n), instance.tasks[j].demand), committed_amount.get((n, j), 0))
-
-    model.x = pyo.Var(model.A, domain=pyo.Binary)  # arc flown
-    model.end = pyo.Var(model.E, domain=pyo.Binary)  # route closes after node (START: unused)
-    model.y = pyo.Var(model.V, domain=pyo.Binary)  # AAV n visits task j
-    model.a = pyo.Var(model.V, domain=pyo.NonNegativeIntegers,
-                      bounds=lambda m, n, j: (0, upper_amount(n, j)))
-    model.t = pyo.Var(model.V, bounds=lambda m, n, j: (networks[n].earliest[j],
-                                                      networks[n].latest[j]))
-    model.dl = pyo.Var(model.V, bounds=lambda m, n, j: (0, cap(n)))  # delivery goods after
-    model.pl = pyo.Var(model.V, bounds=lambda m, n, j: (0, cap(n)))  # pickup goods after
-    model.u = pyo.Var(model.T, bounds=(0, 1))  # task served
-    model.Tm = pyo.Var(model.T, bounds=lambda m, j: (instance.tasks[j].t_start,
-                                                     _task_latest(data, j)))
-
-    arcs_in: dict[tuple[int, int], list] = {(n, j): [] for n, j in visits}
-    arcs_out: dict[tuple[int, int], list] = {(n, i): [] for n, i in ends}
-    for key in arcs:
-        n, i, j, _ = key
-        arcs_in[n, j].append(key)
-        arcs_out[n, i].append(key)
-
-    # --- routing: one path per AAV from its start, closed by the end arc -----------------
-    model.leave_start = pyo.Constraint(range(n_aavs), rule=lambda m, n: sum(
-        m.x[k] for k in arcs_out[n, START]) + m.end[n, START] == 1)
-    model.flow_in = pyo.Constraint(model.V, rule=lambda m, n, j: sum(
-        m.x[k] for k in arcs_in[n, j]) == m.y[n, j])
-    model.flow_out = pyo.Constraint(model.V, rule=lambda m, n, j: sum(
-        m.x[k] for k in arcs_out[n, j]) + m.end[n, j] == m.y[n, j])
-    model.amount_min = pyo.Constraint(model.V, rule=lambda m, n, j: m.a[n, j] >= m.y[n, j])
-    model.amount_max = pyo.Constraint(model.V, rule=lambda m, n, j: m.a[n, j]
-                                      <= upper_amount(n, j) * m.y[n, j])
-
-    def on_time_amount(m: Any, j: int) -> Any:
-        return sum(m.a[n, j] for n, net in enumerate(networks) if j in net.earliest
-                   and (n, j) not in late)
-
-    # covered <= on-time goods and <= demand: C_load = 1 - covered / R (Eq. 5's max(0, .)).
-    model.covered = pyo.Var(model.T, bounds=lambda m, j: (0, instance.tasks[j].demand))
-    model.coverage = pyo.Constraint(model.T, rule=lambda m, j: m.covered[j]
-                                    <= on_time_amount(m, j))
-
-    # Canonical solutions bring no more than the demand (unless a committed visit did).
-    def demand_rule(m: Any, j: int) -> Any:
-        amount = on_time_amount(m, j)
-        if isinstance(amount, int):
-            return pyo.Constraint.Skip
-        fixed = sum(a for (n, i), a in committed_amount.items() if i == j and (n, j) not in late)
-        return amount <= max(instance.tasks[j].demand, fixed)
-
-    model.demand = pyo.Constraint(model.T, rule=demand_rule)
-
-    # --- time (Eq. 7): t_j >= t_i + travel on the arc flown; windows are the bounds --------
-    pairs: dict[tuple[int, int, int], list] = {}
-    for key in arcs:
-        pairs.setdefault(key[:3], []).append(key)
-
-    def time_rule(m: Any, n: int, i: int, j: int) -> Any:
-        keys = pairs[n, i, j]
-        travel = sum(arc_of[k].travel * m.x[k] for k in keys)
-        if i == START:
-            return m.t[n, j] >= travel
-        net = networks[n]
-        big_m = max(0.0, net.latest[i] + max(arc_of[k].travel for k in keys) - net.earliest[j])
-        used = sum(m.x[k] for k in keys)
-        return m.t[n, j] >= m.t[n, i] + travel - big_m * (1 - used)
-
-    model.P = pyo.Set(initialize=list(pairs), dimen=3, ordered=True)
-    model.time = pyo.Constraint(model.P, rule=time_rule)
-
-    # A free arc out of the anchor leaves it no earlier than the plan (MODEL.md, "Time").
-    def ready_rule(m: Any, n: int, i: int, j: int) -> Any:
-        net = networks[n]
-        if i != net.anchor or (net.ready <= 0 and net.committed_depot is None):
-            return pyo.Constraint.Skip
-        speed = instance.aavs[n].speed
-        return m.t[n, j] >= sum(net.ready_arrival(arc_of[k], speed) * m.x[k]
-                                for k in pairs[n, i, j])
-
-    model.ready = pyo.Constraint(model.P, rule=ready_rule)
-    # Arcs of zero travel time (coincident points) need an order to exclude cycles.
-    zero = [p for p in pairs if p[1] != START and min(arc_of[k].travel for k in pairs[p]) == 0]
-    if zero:
-        model.rank = pyo.Var(model.V, bounds=(0, len(chosen)))
-        model.order = pyo.Constraint(zero, rule=lambda m, n, i, j: m.rank[n, j] >= m.rank[
-            n, i] + 1 - (len(chosen) + 1) * (1 - sum(m.x[k] for k in pairs[n, i, j])))
-
-    if options.time_flow:
-        _add_time_flow(model, data, arc_of, arcs_in, arcs_out)
-
-    # --- loads (Eq. 10): d after a visit >= the deliveries still ahead in the trip --------
-    def is_delivery(j: int) -> bool:
-        return instance.tasks[j].is_delivery
-
-    def delivered(m: Any, n: int, j: int) -> Any:
-        return m.a[n, j] if is_delivery(j) else 0
-
-    def picked(m: Any, n: int, j: int) -> Any:
-        return 0 if is_delivery(j) else m.a[n, j]
-
-    model.capacity = pyo.Constraint(model.V, rule=lambda m, n, j: m.dl[n, j] + m.pl[n, j]
-                                <= cap(n))
-    model.depot_load = pyo.Constraint(model.V, rule=lambda m, n, j: m.dl[n, j]
-                                      + delivered(m, n, j) <= cap(n))
-    model.own_pickup = pyo.Constraint(model.V, rule=lambda m, n, j: m.pl[n, j]
-                                      >= picked(m, n, j))
-    direct = [k for k in arcs if k[3] == DIRECT]
-
-    def delivery_chain(m: Any, n: int, i: int, j: int, mode: int) -> Any:
-        before = 0 if i == START else m.dl[n, i]
-        return before >= m.dl[n, j] + delivered(m, n, j) - cap(n) * (1 - m.x[n, i, j, mode])
-
-    def pickup_chain(m: Any, n: int, i: int, j: int, mode: int) -> Any:
-        before = 0 if i == START else m.pl[n, i]
-        return m.pl[n, j] >= before + picked(m, n, j) - cap(n) * (1 - m.x[n, i, j, mode])
-
-    model.delivery_chain = pyo.Constraint(direct, rule=delivery_chain)
-    # A committed depot visit the AAV has left loaded what it recorded, no more.
-    model.recorded_load = pyo.Constraint(
-        [(n, j) for n, p in enumerate(prefixes) for j in p.loads],
-        rule=lambda m, n, j: m.dl[n, j] + delivered(m, n, j) <= prefixes[n].loads[j])
-    model.pickup_chain = pyo.Constraint([k for k in direct if k[1] != START],
-                                        rule=pickup_chain)
-
-    if options.capacity_cuts:
-        def trips(m: Any, n: int) -> Any:
-            return sum(m.x[k] for k in arcs if k[0] == n and k[3] != DIRECT)
-
-        def used(m: Any, n: int) -> Any:
-            return 1 - m.end[n, START]
-
-        def kind_rows(delivery: bool) -> list[int]:
-            return [n for n in range(n_aavs)
-                    if any(is_delivery(j) == delivery for j in networks[n].tasks)]
-
-        model.delivery_trips = pyo.Constraint(kind_rows(True), rule=lambda m, n: sum(
-            m.a[n, j] for j in networks[n].tasks if is_delivery(j)) <= cap(n) * trips(m, n))
-        model.pickup_trips = pyo.Constraint(kind_rows(False), rule=lambda m, n: sum(
-            m.a[n, j] for j in networks[n].tasks if not is_delivery(j))
-            <= cap(n) * (trips(m, n) + used(m, n)))
-
-    # --- range (Eq. 9): Dcum and the over-range indicator where it can matter -------------
-    op_cost: dict[tuple[int, int], Any] = {}
-    over_terms = []
-    for n, net in enumerate(networks):
-        aav = instance.aavs[n]
-        per_metre = aav.alpha / 1000.0 / e_base
-        full = aav.full_range_cost / e_base
-        for j in net.tasks:
-            leg_cost = sum(per_metre * arc_of[k].leg * model.x[k] for k in arcs_in[n, j])
-            reach = aav.speed * net.latest[j]  # Dcum <= v * t <= v * t_end
-            if net.min_distance[j] > aav.max_range:
-                data.over_range[n, j] = 1
-                op_cost[n, j] = full * model.y[n, j]
-            elif reach <= aav.max_range:
-                data.over_range[n, j] = 0
-                op_cost[n, j] = leg_cost
-            else:
-                data.over_range[n, j] = None
-                data.range_aavs.add(n)
-                over_terms.append((n, j, leg_cost, full, per_metre))
-    if over_terms:
-        range_visits = [(n, j) for n, j in visits if n in data.range_aavs]
-        model.RV = pyo.Set(initialize=range_visits, dimen=2, ordered=True)
-        model.dc = pyo.Var(model.RV, bounds=lambda m, n, j: (
-            networks[n].min_distance[j], instance.aavs[n].speed * networks[n].latest[j]))
-        over = [(n, j) for n, j, *_ in over_terms]
-        model.o = pyo.Var(over, domain=pyo.Binary)
-        model.q = pyo.Var(over, domain=pyo.NonNegativeReals)
-
-        def distance_rule(m: Any, n: int, i: int, j: int) -> Any:
-            keys = pairs[n, i, j]
-            flown = sum(arc_of[k].distance * m.x[k] for k in keys)
-            if i == START:
-                return m.dc[n, j] >= flown
-            big_m = max(0.0, m.dc[n, i].ub + max(arc_of[k].distance for k in keys)
-                        - m.dc[n, j].lb)
-            return m.dc[n, j] >= m.dc[n, i] + flown - big_m * (1 - sum(m.x[k] for k in keys))
-
-        model.distance = pyo.Constraint([p for p in pairs if p[0] in data.range_aavs],
-                                        rule=distance_rule)
-        if options.range_time_link:
-            model.range_time = pyo.Constraint(model.RV, rule=lambda m, n, j: m.dc[n, j]
-                                              <= instance.aavs[n].speed * m.t[n, j])
-        model.within_range = pyo.Constraint(over, rule=lambda m, n, j: m.dc[n, j]
-                                            <= instance.aavs[n].max_range
-                                            + (m.dc[n, j].ub - instance.aavs[n].max_range)
-                                            * m.o[n, j])
-        model.over_visit = pyo.Constraint(over, rule=lambda m, n, j: m.o[n, j] <= m.y[n, j])
-        model.q_leg = pyo.ConstraintList()
-        model.q_full = pyo.ConstraintList()
-        for n, j, leg_cost, full, per_metre in over_terms:
-            longest = max((per_metre * arc_of[k].leg for k in arcs_in[n, j]), default=0.0)
-            model.q_leg.add(model.q[n, j] >= leg_cost - longest * model.o[n, j])
-            model.q_full.add(model.q[n, j] >= full * model.o[n, j])
-            op_cost[n, j] = model.q[n, j]
-
-    # --- C_time: the latest on-time arrival of the coalition, 1 when nobody comes ---------
-    late_tasks = {m for _, m in late}
-    model.latest_arrival = pyo.Constraint(
-        [(n, j) for n, j in visits if j not in late_tasks],
-        rule=lambda m, n, j: m.Tm[j] >= m.t[n, j] - (networks[n].latest[j]
-                                                     - instance.tasks[j].t_start)
-        * (1 - m.y[n, j]))
-    model.served = pyo.Constraint(model.T, rule=lambda m, j: m.u[j] <= sum(
-        m.y[n, j] for n, net in enumerate(networks) if j in net.earliest))
-    for j in late_tasks:  # a late committed visit makes C_time = 1 whatever else comes
-        model.u[j].fix(0)
-        model.Tm[j].fix(instance.tasks[j].t_start)
-
-    if options.cover_cuts:
-        model.cover = pyo.ConstraintList()
-        for j in chosen:
-            members = [n for n, net in enumerate(networks) if j in net.earliest
-                       and (n, j) not in late]
-            upper = {n: upper_amount(n, j) for n in members}
-            for rest, coef in coalition_cover_cuts(upper, instance.tasks[j].demand):
-                model.cover.add(model.covered[j] <= rest + sum(
-                    c * model.y[n, j] for n, c in coef.items()))
-
-    # --- committed prefixes: their arcs and amounts are fixed -----------------------------
-    for n, prefix in enumerate(prefixes):
-        for i, j, mode, amount in prefix.steps:
-            model.x[n, i, j, mode].fix(1)
-            model.a[n, j].fix(amount)
-        if prefix.trailing_depot is not None:
-            for key in arcs_out[n, prefix.last]:
-                if key[3] != prefix.trailing_depot:
-                    model.x[key].fix(0)
-
-    # --- symmetry: identical AAVs ordered by their smallest task index --------------------
-    if options.symmetry:
-        sym = []
-        for group in identical_groups(instance, committed):
-            sym += list(itertools.pairwise(group))
-        rows = [(n, n2, j) for n, n2 in sym for j in networks[n2].tasks]
-        model.symmetry = pyo.Constraint(rows, rule=lambda m, n, n2, j: m.y[n2, j] <= sum(
-            m.y[n, i] for i in networks[n].tasks if i <= j))
-
-    # --- objective (Eqs. 1, 4-6, 8, 9) ----------------------------------------------------
-    def task_cost(m: Any, j: int) -> Any:
-        task = instance.tasks[j]
-        load = 1 - m.covered[j] / task.demand
-        tardiness = 1 - m.u[j] + (m.Tm[j] - task.t_start) / horizon
-        op = sum(op_cost[n, j] for n, net in enumerate(networks) if j in net.earliest)
-        return w1 * load + w2 * tardiness + w3 * op
-
-    model.J = pyo.Objective(expr=data.constant + sum(task_cost(model, j) for j in chosen),
-                            sense=pyo.minimize)
-    return model
-
-
-def _add_time_flow(model: Any, data: MilpData, arc_of: dict, arcs_in: dict,
-                   arcs_out: dict) -> None:
-    """Arrival times carried on the arcs: r_a is the arrival at a's head when a is flown, 0
-    otherwise, so Z_nj = sum of r over the arcs into j is t_nj * y_nj. The big-M time rows
-    let a fractional arc leave t_nj at its lower bound; here every fraction of flow carries
-    its own arrival, which is what the coalition's C_time then pays for
-    (T_j - t_start >= Z_nj - t_start * y_nj). Valid: at an integer point set each r to the
-    arrival of its head; leaving i along b arrives no earlier than t_i + travel_b, and a route
-    that ends at i has no outgoing r (the end term absorbs Z_ni <= t_end(i))."""
-    import pyomo.environ as pyo
-
-    instance = data.instance
-    networks = data.networks
-
-    def lowest(key: tuple) -> float:
-        n, i, j, _ = key
-        net = networks[n]
-        leave = 0.0 if i == START else net.earliest[i]
-        low = max(net.earliest[j], leave + arc_of[key].travel)
-        if i == net.anchor:
-            low = max(low, net.ready_arrival(arc_of[key], instance.aavs[n].speed))
-        return low
-
-    model.r = pyo.Var(model.A, domain=pyo.NonNegativeReals)
-    model.r_low = pyo.Constraint(model.A, rule=lambda m, *k: m.r[k] >= lowest(k) * m.x[k])
-    model.r_high = pyo.Constraint(model.A, rule=lambda m, *k: m.r[k]
-                                  <= networks[k[0]].latest[k[2]] * m.x[k])
-
-    def arrival_flow(m: Any, n: int, j: int) -> Any:
-        return sum(m.r[k] for k in arcs_in[n, j])
-
-    model.r_leave = pyo.Constraint(model.V, rule=lambda m, n, i: sum(
-        m.r[k] - arc_of[k].travel * m.x[k] for k in arcs_out[n, i])
-        >= arrival_flow(m, n, i) - networks[n].latest[i] * m.end[n, i])
-    model.r_arrival = pyo.Constraint(model.V, rule=lambda m, n, j: m.t[n, j]
-                                     >= arrival_flow(m, n, j))
-    late_tasks = {j for _, j in data.late}
-    model.r_coalition = pyo.Constraint(
-        [(n, j) for n, j in model.V if j not in late_tasks],
-        rule=lambda m, n, j: m.Tm[j] - instance.tasks[j].t_start
-        >= arrival_flow(m, n, j) - instance.tasks[j].t_start * m.y[n, j])
-
-
-def _task_latest(data: MilpData, j: int) -> float:
-    return max([data.instance.tasks[j].t_end]
-               + [net.latest[j] for net in data.networks if j in net.latest])
 
 
 # --- decoding and warm starts --------------------------------------------------------------
@@ -559,7 +246,8 @@ def violated_constraints(model: Any, tolerance: float = 1e-6) -> list[str]:
 # --- solving ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class SolveReport:
-    """What a backend run says about itself (MODEL.md's status vocabulary)."""
+    """What a backend run says about itself (its status as docs/plugins.md, "What
+    `PlanResult` carries", defines them)."""
 
     status: str  # optimal | feasible | no-solution | error
     objective: float | None

@@ -1,8 +1,8 @@
 """What the exact models share: the canonical form of a solution and the routing network of
 each AAV (which task visits and which arcs can occur in an optimal solution).
 
-Canonical form (MODEL.md, "What follows"): every feasible solution can be turned, without
-raising J, into one in which
+Canonical form (docs/model.md, "Cost", says why late visits never help): every feasible
+solution can be turned, without raising J, into one in which
 * no visit is late (dropping a late visit never raises J),
 * at most one depot visit lies between two task visits and before the first one (of two depot
   visits in a row the first is useless: by the triangle inequality skipping it is no longer and

@@ -1,4 +1,4 @@
-"""Exact pricing of the branch-and-price master (formulations/branch_price.py): for one AAV,
+"""Exact pricing of the branch-and-price master (formulations/branch_price/): for one AAV,
 the schedule (visits, depot reloads, amounts) of least reduced cost, by labelling.
 
 A label is a partial schedule from the AAV's anchor (its start, or the end of its committed
@@ -55,7 +55,7 @@ from numba import njit, objmode
 
 from tsac_bench.formulations.network import DIRECT, START, AavNetwork
 from tsac_bench.model import Instance, Route, Visit
-from tsac_bench.planning import Anchor as PlanningAnchor
+from tsac_bench.planning import Anchor
 
 
 @dataclass
@@ -112,11 +112,11 @@ class Restrictions:
 
 
 @dataclass(frozen=True)
-class Anchor:
+class PricingAnchor:
     """Where the free part of an AAV's schedule starts: after its committed prefix."""
 
     node: int  # START or the last committed task
-    clock: float  # when the AAV can leave for its first free visit (MODEL.md, "Time")
+    clock: float  # when the AAV can leave for its first free visit (docs/model.md, "Time")
     flown: float  # Dcum when it leaves
     visited: int  # bit mask of committed tasks
     peak: int
@@ -154,7 +154,7 @@ class Pricer:
     schedules.
     """
 
-    def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: Anchor,
+    def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: PricingAnchor,
                  timed: frozenset[int], ng_size: int) -> None:
         self.instance = instance
         self.n = n
@@ -768,7 +768,7 @@ def _cheapest_per_node(labels, node, cost, alive, cap, n_nodes):
 
 
 def anchor_of(instance: Instance, n: int, prefix: Route, trailing_depot: int | None,
-              last: int, leaves: PlanningAnchor) -> Anchor:
+              last: int, leaves: Anchor) -> PricingAnchor:
     """The anchor after AAV n's committed ``prefix`` (walked for its current trip's load),
     leaving as the planning state's anchor says (``PlanningState.anchor``: its time and Dcum
     there, and the goods on board from a depot whose load was recorded).
@@ -793,7 +793,7 @@ def anchor_of(instance: Instance, n: int, prefix: Route, trailing_depot: int | N
                 peak = max(peak, pickup)
     if leaves.on_board is not None:
         peak = max(peak, instance.aavs[n].capacity - leaves.on_board)
-    return Anchor(last, leaves.time, leaves.flown, visited, peak, pickup, loaded,
+    return PricingAnchor(last, leaves.time, leaves.flown, visited, peak, pickup, loaded,
                   trailing_depot is not None)
 
 

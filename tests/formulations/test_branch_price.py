@@ -15,7 +15,10 @@ from brute_force import brute_force
 from plans import random_plan
 from tiny import tiny_instance
 
-from tsac_bench.formulations.branch_price import BranchPrice, _compatible
+from tsac_bench.formulations.branch_price import BranchPrice, BranchPriceOptions
+from tsac_bench.formulations.branch_price.columns import compatible
+from tsac_bench.formulations.branch_price.duals import best_closes, reduced_cost
+from tsac_bench.formulations.branch_price.duals import prices as prices_of
 from tsac_bench.formulations.pricing import Restrictions, TaskPrices, all_schedules
 from tsac_bench.model import Visit
 from tsac_bench.model.evaluator import CostEvaluator
@@ -37,6 +40,11 @@ def close(a: float, b: float, rel: float = 1e-6) -> bool:
     return abs(a - b) <= rel * max(1.0, abs(b))
 
 
+def search_of(instance, *state, **knobs) -> BranchPrice:
+    """The search of a planning state with the options ``knobs``, the others default."""
+    return BranchPrice(instance, *state, options=BranchPriceOptions(**knobs))
+
+
 def solve_bp(instance, state=None, **settings):
     state = state or PlanningState.static(instance)
     return BranchPriceAllocator(incumbent="greedy", **settings).plan(state, seed=0)
@@ -54,9 +62,9 @@ def test_exact_bp_equals_brute_force(seed: int) -> None:
     extra = {"master_mip_nodes": 100, "dual_smoothing": 0.7} if seed % 3 == 0 else \
         {"strong_reliability": 0} if seed % 3 == 1 else {}
     result = solve_bp(instance, ng_size=1 if seed % 2 else 8, **extra)
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
-    assert result.stats["lower_bound"] <= J_brute + 1e-9
+    assert result.lower_bound <= J_brute + 1e-9
     assert result.stats["root_bound"] <= J_brute + 1e-9
 
 
@@ -67,7 +75,7 @@ def test_exact_bp_equals_brute_force_four_tasks(seed: int) -> None:
                              tight_range=seed % 2 == 0, n_depots=1)
     J_brute, _ = brute_force(instance)
     result = solve_bp(instance)
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
 
 
@@ -75,9 +83,9 @@ def _regression(name: str) -> None:
     instance = read_instance(REGRESSION / MANIFEST[name]["file"])
     result = solve_bp(instance)
     J_star = MANIFEST[name]["J_star"]
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert close(CostEvaluator(instance).cost(result.routes), J_star)
-    assert result.stats["lower_bound"] <= J_star + 1e-6
+    assert result.lower_bound <= J_star + 1e-6
     assert result.stats["nodes"] >= 1 and result.stats["columns"] >= instance.n_aavs
 
 
@@ -96,7 +104,7 @@ def _random_prices(search: BranchPrice, n: int, rng: random.Random,
                    arrival_cuts: bool = False) -> TaskPrices:
     """Duals of the signs the LP gives (>= 0 on every >= row), random magnitudes; with
     ``arrival_cuts``, random pieces of arrival cuts on some tasks too."""
-    tasks = search.tasks
+    tasks = search.master.tasks
     prices = TaskPrices(
         base=-rng.uniform(0, 2),
         cover={m: rng.choice([0.0, rng.uniform(0, 30)]) for m in tasks},
@@ -108,7 +116,7 @@ def _random_prices(search: BranchPrice, n: int, rng: random.Random,
         visit_bonus={m: rng.uniform(0, 1) for m in tasks if rng.random() < 0.5},
         cut_bonus={m: rng.uniform(0, 2) for m in tasks if rng.random() < 0.5},
         arc_bonus={(a.tail, a.head, a.mode): rng.uniform(0, 1)
-                   for a in search.pricers[n].network.arcs if rng.random() < 0.3})
+                   for a in search.master.pricers[n].network.arcs if rng.random() < 0.3})
     if arrival_cuts:
         for m in tasks:
             breaks = sorted(rng.uniform(0, 0.4) for _ in range(rng.choice([0, 2, 4])))
@@ -124,25 +132,25 @@ def _pricing_matches_every_schedule(search: BranchPrice, rng: random.Random) -> 
     the least over every schedule (each priced from the evaluator's walk of its route);
     returns how many (AAV, prices) pairs had a schedule besides the empty one."""
     checked = 0
-    for n, pricer in enumerate(search.pricers):
+    for n, pricer in enumerate(search.master.pricers):
         for use_lp in (True, False):
             if use_lp:
-                _, _, duals = search.solve_lp()
-                prices = search.prices(n, duals)
-                conv = duals[search.conv[n]]
+                _, _, duals = search.master.solve_lp()
+                prices = prices_of(search.master, n, duals)
+                conv = duals[search.master.conv[n]]
             else:
                 prices = _random_prices(search, n, rng, arrival_cuts=True)
                 conv = -prices.base
                 # The labelling starts from the prefix's own terms, as search.prices does.
-                prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
+                prices.base = reduced_cost(search.master.make_column(n, ()), prices) - conv
             least, found = pricer.price(prices, Restrictions())
-            every = [search.reduced_cost(search.make_column(n, tail), prices) - conv
+            every = [reduced_cost(search.master.make_column(n, tail), prices) - conv
                      for tail in all_schedules(pricer)]
             assert least == pytest.approx(min(every), abs=1e-9)
             for schedule in found:  # the labelling's arithmetic is the evaluator's
-                column = search.make_column(n, schedule.tail)
+                column = search.master.make_column(n, schedule.tail)
                 assert schedule.reduced_cost == pytest.approx(
-                    search.reduced_cost(column, prices) - conv, abs=1e-9)
+                    reduced_cost(column, prices) - conv, abs=1e-9)
             checked += len(every) > 1
     return checked
 
@@ -154,8 +162,8 @@ def _arrival_windows(search: BranchPrice, n: int, rng: random.Random,
     a "later than" side a penalty on the early visits in ``prices`` (the dual of its
     master row), small (0.01) or prohibitive (100)."""
     terms: dict[int, set[float]] = {}
-    for tail in all_schedules(search.pricers[n]):
-        for m, t in search.make_column(n, tail).theta.items():
+    for tail in all_schedules(search.master.pricers[n]):
+        for m, t in search.master.make_column(n, tail).theta.items():
             terms.setdefault(m, set()).add(t)
     restrictions = Restrictions()
     for m in sorted(terms):
@@ -178,15 +186,16 @@ def _windows_case(search: BranchPrice, n: int, rng: random.Random, scale: float 
             terms[key] *= scale
     conv = -prices.base
     windows = _arrival_windows(search, n, rng, prices)
-    prices.base = search.reduced_cost(search.make_column(n, ()), prices) - conv
+    prices.base = reduced_cost(search.master.make_column(n, ()), prices) - conv
     return prices, conv, windows
 
 
 def _least_allowed(search: BranchPrice, n: int, prices: TaskPrices, conv: float,
                    windows: Restrictions) -> float:
-    allowed = [search.make_column(n, tail) for tail in all_schedules(search.pricers[n])]
-    return min(search.reduced_cost(c, prices) - conv for c in allowed
-               if _compatible(c, windows))
+    master = search.master
+    allowed = [master.make_column(n, tail) for tail in all_schedules(master.pricers[n])]
+    return min(reduced_cost(c, prices) - conv for c in allowed
+               if compatible(c, windows))
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -198,17 +207,17 @@ def test_pricing_under_arrival_windows_finds_the_least_of_the_allowed_schedules(
     search = BranchPrice(instance)
     rng = random.Random(seed)
     restricted = 0
-    for n, pricer in enumerate(search.pricers):
+    for n, pricer in enumerate(search.master.pricers):
         for _ in range(3):
             prices, conv, windows = _windows_case(search, n, rng)
             least, found = pricer.price(prices, windows)
             assert least == pytest.approx(_least_allowed(search, n, prices, conv, windows),
                                           abs=1e-9)
             for f in found:
-                column = search.make_column(n, f.tail)
-                assert _compatible(column, windows)
+                column = search.master.make_column(n, f.tail)
+                assert compatible(column, windows)
                 assert f.reduced_cost == pytest.approx(
-                    search.reduced_cost(column, prices) - conv, abs=1e-9)
+                    reduced_cost(column, prices) - conv, abs=1e-9)
             restricted += bool(prices.early_penalty or windows.arrival_high)
     assert restricted >= 3
 
@@ -223,7 +232,7 @@ def test_an_earlier_label_that_pays_the_early_penalty_in_advance_dominates_exact
         instance = tiny_instance(seed, n_aavs=2, n_tasks=5, max_demand=3)
         search = BranchPrice(instance)
         rng = random.Random(seed)
-        for n, pricer in enumerate(search.pricers):
+        for n, pricer in enumerate(search.master.pricers):
             for _ in range(2):
                 prices, conv, windows = _windows_case(search, n, rng, scale=0.01)
                 counts = []
@@ -243,11 +252,11 @@ def test_a_pricing_call_stops_at_the_deadline_and_then_claims_no_bound() -> None
     from tsac_bench.model.generator import generate
 
     search = BranchPrice(generate("4/10", 1))
-    _, _, duals = search.solve_lp()
-    prices = search.prices(0, duals)
-    least, _ = search.pricers[0].price(prices, Restrictions())
+    _, _, duals = search.master.solve_lp()
+    prices = prices_of(search.master, 0, duals)
+    least, _ = search.master.pricers[0].price(prices, Restrictions())
     assert math.isfinite(least) and least < 0
-    cut, _ = search.pricers[0].price(prices, Restrictions(), deadline=0.0)
+    cut, _ = search.master.pricers[0].price(prices, Restrictions(), deadline=0.0)
     assert cut == -math.inf
 
 
@@ -257,28 +266,28 @@ def _ng_pricing_checks(seed: int) -> int:
     in every neighbourhood it is the exact labelling itself; what it returns are schedules,
     priced as the evaluator prices them. Returns how often it was strictly lower."""
     instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
-    narrow, wide = BranchPrice(instance, ng_size=1), BranchPrice(instance, ng_size=4)
+    narrow, wide = search_of(instance, ng_size=1), search_of(instance, ng_size=4)
     strictly_lower = 0
     for n, prices, conv, windows in _random_pricing_cases(narrow, seed):
-        exact, _ = narrow.pricers[n].price(prices, windows)
-        relaxed, found = narrow.pricers[n].price(prices, windows, relaxed=True)
+        exact, _ = narrow.master.pricers[n].price(prices, windows)
+        relaxed, found = narrow.master.pricers[n].price(prices, windows, relaxed=True)
         assert relaxed <= exact + 1e-12
         strictly_lower += relaxed < exact - 1e-9
-        assert wide.pricers[n].price(prices, windows, relaxed=True)[0] == exact
+        assert wide.master.pricers[n].price(prices, windows, relaxed=True)[0] == exact
         for schedule in found:
             tasks = [v.node for v in schedule.tail if not instance.is_depot(v.node)]
             assert len(tasks) == len(set(tasks))
-            column = narrow.make_column(n, schedule.tail)
-            assert _compatible(column, windows)
+            column = narrow.master.make_column(n, schedule.tail)
+            assert compatible(column, windows)
             assert schedule.reduced_cost == pytest.approx(
-                narrow.reduced_cost(column, prices) - conv, abs=1e-9)
+                reduced_cost(column, prices) - conv, abs=1e-9)
     return strictly_lower
 
 
 def _random_pricing_cases(search: BranchPrice, seed: int, per_aav: int = 4):
     """(AAV, random duals, their convexity dual, random arrival windows), per_aav per AAV."""
     rng = random.Random(seed)
-    for n in range(search.instance.n_aavs):
+    for n in range(search.master.instance.n_aavs):
         for _ in range(per_aav):
             yield n, *_windows_case(search, n, rng)
 
@@ -291,7 +300,7 @@ def test_ng_pricing_bounds_the_exact_least_and_returns_only_schedules() -> None:
 
 def test_growing_the_neighbourhoods_forbids_exactly_the_cycle() -> None:
     instance = tiny_instance(0, n_aavs=2, n_tasks=4, max_demand=3)
-    pricer = BranchPrice(instance, ng_size=1).pricers[0]
+    pricer = search_of(instance, ng_size=1).master.pricers[0]
     before = pricer._ng_memory.copy()
     depot = instance.n_tasks  # the first depot's node
     # Task 0 visited twice with tasks 2 and 1 (and a depot) in between.
@@ -309,19 +318,19 @@ def _ng_growth_checks(seed: int) -> int:
     same as the exact labelling whether a schedule of negative reduced cost exists.
     Returns how often the neighbourhoods grew."""
     instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=3)
-    exact_search, growing = BranchPrice(instance, ng_size=1), BranchPrice(instance, ng_size=1)
+    exact_search, growing = search_of(instance, ng_size=1), search_of(instance, ng_size=1)
     grew = 0
     for n, prices, _, windows in _random_pricing_cases(exact_search, seed):
-        drawn, _ = exact_search.pricers[n].price(prices, windows)
+        drawn, _ = exact_search.master.pricers[n].price(prices, windows)
         # As drawn, and shifted so that no schedule prices out (a converged LP): there the
         # relaxation's negative paths are all cycles.
         for shift in (0.0, 1e-3 - drawn):
             shifted = dataclasses.replace(prices, base=prices.base + shift)
             exact = drawn + shift
-            before = growing.pricers[n]._ng_memory.copy()
-            relaxed, found = growing.pricers[n].price(shifted, windows, relaxed=True,
+            before = growing.master.pricers[n]._ng_memory.copy()
+            relaxed, found = growing.master.pricers[n].price(shifted, windows, relaxed=True,
                                                       growth_rounds=100)
-            grew += bool((growing.pricers[n]._ng_memory != before).any())
+            grew += bool((growing.master.pricers[n]._ng_memory != before).any())
             assert relaxed <= exact + 1e-12
             assert bool(found) == (exact < -1e-9), (found, relaxed, exact)
             if not found:
@@ -344,23 +353,24 @@ def test_the_integer_master_is_no_worse_than_any_combination_of_the_lp_support(
     import numpy as np
 
     instance = tiny_instance(400 + seed, n_aavs=2, n_tasks=4, max_demand=5)
-    search = BranchPrice(instance, master_mip_nodes=1000)
+    search = search_of(instance, master_mip_nodes=1000)
     assert search.root()["converged"]
-    x = np.asarray(search.h.getSolution().col_value)
-    support = [[c for c in search.columns if c.aav == n and x[c.index] > 1e-9]
+    x = np.asarray(search.master.h.getSolution().col_value)
+    support = [[c for c in search.master.columns if c.aav == n and x[c.index] > 1e-9]
                for n in range(instance.n_aavs)]
-    every = np.array([c.index for c in search.columns], np.int32)
+    every = np.array([c.index for c in search.master.columns], np.int32)
     best_point = math.inf
     for combo in itertools.product(*support):
         ones = np.array([c.index for c in combo], np.int32)
-        search.h.changeColsBounds(len(every), every, np.zeros(len(every)),
-                                  np.zeros(len(every)))
-        search.h.changeColsBounds(len(ones), ones, np.ones(len(ones)), np.ones(len(ones)))
-        value, _, _ = search.solve_lp()
+        search.master.h.changeColsBounds(len(every), every, np.zeros(len(every)),
+                                         np.zeros(len(every)))
+        search.master.h.changeColsBounds(len(ones), ones, np.ones(len(ones)),
+                                         np.ones(len(ones)))
+        value, _, _ = search.master.solve_lp()
         best_point = min(best_point, value)
-    search.h.changeColsBounds(len(every), every, np.zeros(len(every)),
-                              np.full(len(every), search.inf))
-    plan = search.integer_master_plan(math.inf, 60.0)
+    search.master.h.changeColsBounds(len(every), every, np.zeros(len(every)),
+                                     np.full(len(every), search.master.inf))
+    plan = search.master.integer_master_plan(math.inf, 60.0)
     assert plan is not None
     assert CostEvaluator(instance).cost(plan) <= best_point + 1e-9
 
@@ -375,20 +385,20 @@ def test_the_root_dive_finds_the_optimum_and_leaves_the_root_lp_as_it_was() -> N
         J_brute, _ = brute_force(instance)
         search = BranchPrice(instance)
         clock = {"lp": 0.0, "pricing": 0.0}
-        value, _, x, converged = search.column_generation(search.apply(()), math.inf,
+        value, _, x, converged = search.pricing.column_generation(search.master.apply(()), math.inf,
                                                            math.inf, clock)
         assert converged
         if value >= J_brute - 1e-9:
             continue
-        saved = search.basis()
+        saved = search.master.basis()
         costs = [CostEvaluator(instance).cost(plan)
                  for plan in search.dive((), x, math.inf)]
         assert min(costs) >= J_brute - 1e-9
         if close(min(costs), J_brute):
             reached.append(seed)
-        search.apply(())
-        search.restore_basis(saved)
-        assert search.solve_lp()[0] == pytest.approx(value, rel=1e-12, abs=1e-12)
+        search.master.apply(())
+        search.master.restore_basis(saved)
+        assert search.master.solve_lp()[0] == pytest.approx(value, rel=1e-12, abs=1e-12)
     assert reached == [3, 4, 9, 10, 11, 14]
 
 
@@ -400,20 +410,22 @@ def test_reliability_branching_scores_a_scored_candidate_from_its_pseudo_costs()
     checked = []
     for seed in range(16):
         instance = tiny_instance(500 + seed, n_aavs=2, n_tasks=4, max_demand=5)
-        search = BranchPrice(instance, strong_reliability=1)
+        search = search_of(instance, strong_reliability=1)
         clock = {"lp": 0.0, "pricing": 0.0}
-        _, _, x, _ = search.column_generation(search.apply(()), math.inf, math.inf, clock)
-        candidates = [(key, v) for key, v in sorted(search.visits(x).items())
+        _, _, x, _ = search.pricing.column_generation(search.master.apply(()), math.inf,
+                                                      math.inf, clock)
+        candidates = [(key, v) for key, v in sorted(search.master.visits(x).items())
                       if 1e-6 < v < 1.0 - 1e-6]
         if len(candidates) < 2:
             continue
-        solves = search.lp_solves
-        first = search.strongest(candidates)
-        assert search.lp_solves == solves + 2 * len(candidates)
-        if any(count == 0 for key, _ in candidates for _, count in search.pseudo_costs[key]):
+        solves = search.master.lp_solves
+        first = search.branching.strongest(candidates)
+        assert search.master.lp_solves == solves + 2 * len(candidates)
+        history = search.branching.pseudo_costs
+        if any(count == 0 for key, _ in candidates for _, count in history[key]):
             continue
-        assert search.strongest(candidates) == first
-        assert search.lp_solves == solves + 2 * len(candidates)
+        assert search.branching.strongest(candidates) == first
+        assert search.master.lp_solves == solves + 2 * len(candidates)
         checked.append(seed)
     assert len(checked) >= 3, checked
 
@@ -427,34 +439,36 @@ def test_shedding_columns_keeps_the_brute_force_optimum(seed: int) -> None:
     J_brute, _ = brute_force(instance)
     result = solve_bp(instance, columns_per_row=0.1)
     assert result.stats["purged_columns"] > 0
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
-    assert result.stats["lower_bound"] <= J_brute + 1e-9
+    assert result.lower_bound <= J_brute + 1e-9
 
 
 def test_shedding_columns_keeps_the_node_lp_and_the_saved_bases() -> None:
     instance = tiny_instance(7, n_aavs=2, n_tasks=3, max_demand=5)
-    search = BranchPrice(instance, columns_per_row=0.1)
+    search = search_of(instance, columns_per_row=0.1)
     clock = {"lp": 0.0, "pricing": 0.0}
-    value, _, x, _ = search.column_generation(search.apply(()), math.inf, math.inf, clock)
-    before = {(c.aav, c.tail, c.closes): x[c.index] for c in search.columns}
-    queue = [(value, 0, (), search.basis())]
-    x, queue = search.purge_columns(x, queue)
-    assert search.purged > 0 and len(search.columns) == len(before) - search.purged
+    master = search.master
+    value, _, x, _ = search.pricing.column_generation(master.apply(()), math.inf, math.inf,
+                                                      clock)
+    before = {(c.aav, c.tail, c.closes): x[c.index] for c in master.columns}
+    queue = [(value, 0, (), master.basis())]
+    x, queue = master.purge_columns(x, queue)
+    assert master.purged > 0 and len(master.columns) == len(before) - master.purged
     # The LP is the node's again (strong branching reads its value) and every kept column
     # has its lambda, its cost and its place in the indexes under its new index.
-    assert search.h.getInfo().objective_function_value + search.constant == \
+    assert search.master.h.getInfo().objective_function_value + search.master.constant == \
         pytest.approx(value, abs=1e-9)
-    assert search.h.getInfo().simplex_iteration_count == 0
-    costs = search.h.getLp().col_cost_
-    for col in search.columns:
+    assert search.master.h.getInfo().simplex_iteration_count == 0
+    costs = search.master.h.getLp().col_cost_
+    for col in search.master.columns:
         assert x[col.index] == pytest.approx(before[col.aav, col.tail, col.closes], abs=1e-9)
-        assert costs[col.index] == col.op and search.column_at[col.index] is col
-        assert col.index in search.columns_of[col.aav]
+        assert costs[col.index] == col.op and search.master.column_at[col.index] is col
+        assert col.index in search.master.columns_of[col.aav]
     # The open node's saved basis, renumbered, is still the optimal one.
-    search.restore_basis(queue[0][3])
-    search.h.run()
-    assert search.h.getInfo().simplex_iteration_count == 0
+    search.master.restore_basis(queue[0][3])
+    search.master.h.run()
+    assert search.master.h.getInfo().simplex_iteration_count == 0
 
 
 @pytest.mark.parametrize("seed", [4, 7])
@@ -464,7 +478,7 @@ def test_arrival_window_branching_keeps_the_brute_force_optimum(seed: int) -> No
     J_brute, _ = brute_force(instance)
     result = solve_bp(instance)
     assert result.stats["time_branches"] >= 1
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert close(result.stats["J"], J_brute), (result.stats["J"], J_brute)
     without = solve_bp(instance, time_branching=False)
     assert without.stats["time_branches"] == 0
@@ -484,7 +498,7 @@ def test_the_bound_never_exceeds_any_plan(seed: int) -> None:
     # A short limit leaves the search open: its bound must still be a bound, with the ng
     # relaxation's bounds (neighbourhoods of 1 task: odd seeds) or the exact ones.
     result = solve_bp(instance, time_limit=1.0, ng_size=1 if seed % 2 else 8)
-    bound = result.stats["lower_bound"]
+    bound = result.lower_bound
     assert bound is not None and result.stats["root_bound"] is not None
     assert bound <= result.stats["J"] + 1e-9
     assert result.stats["root_bound"] <= result.stats["J"] + 1e-9
@@ -511,9 +525,9 @@ def test_dynamic_states_equal_the_milp(seed: int) -> None:
     instance, state = _dynamic_states(seed)
     milp = ExactAllocator().plan(state)
     # Odd seeds: a pool of a few columns, so that every node after the root sheds some.
-    bp = solve_bp(instance, state, columns_per_row=0.1 if seed % 2 else None)
-    assert milp.stats["status"] == "optimal"
-    assert bp.stats["status"] == "optimal"
+    bp = solve_bp(instance, state, **({"columns_per_row": 0.1} if seed % 2 else {}))
+    assert milp.status == "optimal"
+    assert bp.status == "optimal"
     assert state.violations(bp.routes) == []
     assert close(bp.stats["J"], milp.stats["J"]), (bp.stats["J"], milp.stats["J"])
     # The tasks-on-their-own bound (formulations/task_bound.py) holds in dynamic states too.
@@ -531,24 +545,24 @@ def test_dynamic_state_with_a_committed_join_as_the_milp() -> None:
         (Depot("D0", 0, 0),), (Task("T0", 1000, 0, TaskKind.PICKUP, 20, 0, 3600),))
     state = PlanningState(instance, 1.0, frozenset({0}), ((Visit(0, 10),), ()))
     result = solve_bp(instance, state)
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert result.routes == ((Visit(0, 10), Visit(1)), (Visit(0, 10), Visit(1)))
     # A1 leaves its start at the plan time, 1 s, and is the later of the two at T0 (51 s).
     assert result.stats["J"] == pytest.approx(10 * 51 / 3600 + 2 * 10 / 800, rel=1e-12)
 
 
-@pytest.mark.parametrize("columns_per_row", [None, 0.1])  # the default pool, and shedding
-def test_same_seed_same_result(columns_per_row: float | None) -> None:
+@pytest.mark.parametrize("columns_per_row", [BranchPriceOptions.columns_per_row, 0.1])
+def test_same_seed_same_result(columns_per_row: float) -> None:  # the default pool, shedding
     instance = tiny_instance(7, n_aavs=2, n_tasks=3, max_demand=5)
     first, second = (solve_bp(instance, dive_share=0.5, columns_per_row=columns_per_row)
                      for _ in range(2))
-    assert first.stats["status"] == "optimal"
+    assert first.status == "optimal"
     assert first.stats["nodes"] > 5  # a real tree, not only a root
     assert first.routes == second.routes
     assert first.stats["dives"] >= 2  # the root's and later ones
-    assert (first.stats["purged_columns"] > 0) == (columns_per_row is not None)
-    for key in ("J", "lower_bound", "root_bound", "nodes", "columns", "dives",
-                "purged_columns", "lp_solves"):
+    assert (first.stats["purged_columns"] > 0) == (columns_per_row < 1)
+    assert first.lower_bound == second.lower_bound
+    for key in ("J", "root_bound", "nodes", "columns", "dives", "purged_columns", "lp_solves"):
         assert first.stats[key] == second.stats[key], key
 
 
@@ -557,17 +571,17 @@ def test_registered_and_time_limited() -> None:
 
     instance = generate("3/8", 1)
     result = make_allocator("exact-bp", time_limit=5.0).plan(PlanningState.static(instance))
-    stats = result.stats
-    assert stats["status"] in ("optimal", "feasible")
+    stats, bound = result.stats, result.lower_bound
+    assert result.status in ("optimal", "feasible")
     # None only where not even the root's exact pricing finished in the limit.
-    assert stats["lower_bound"] is None or stats["lower_bound"] <= stats["J"] + 1e-9
+    assert bound is None or bound <= stats["J"] + 1e-9
     assert stats["J"] <= stats["warm_start_J"] + 1e-9
     assert CostEvaluator(instance).cost(result.routes) == pytest.approx(stats["J"], rel=1e-12)
     for key in ("nodes", "columns", "lp_time", "pricing_time", "branching_time",
                 "root_bound"):
         assert key in stats
     # The first pricing in a fresh checkout compiles the labelling, which may take the limit.
-    assert ("mip_gap" in stats) == (stats["lower_bound"] is not None)
+    assert ("mip_gap" in stats) == (bound is not None)
 
 
 def test_a_recorded_load_and_the_plan_time_bind_the_schedule() -> None:
@@ -584,7 +598,7 @@ def test_a_recorded_load_and_the_plan_time_bind_the_schedule() -> None:
                         tasks)
     state = PlanningState(instance, 50.0, frozenset({0, 1}), ((Visit(2, load=5), Visit(0, 5)),))
     result = solve_bp(instance, state)
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert result.routes == ((Visit(2, load=5), Visit(0, 5), Visit(2), Visit(1, 5), Visit(2)),)
     op = 20 * 1.0 / 3200  # a 1 km leg; E_base = 20 * 60 + 2000
     assert result.stats["J"] == pytest.approx(10 * 100 / 3600 + op + 10 * 350 / 3600 + 2 * op,
@@ -617,8 +631,8 @@ def test_the_simulators_states_equal_the_milp(seed: int) -> None:
     for state in states:
         milp = ExactAllocator().plan(state)
         bp = solve_bp(instance, state)
-        assert milp.stats["status"] == "optimal"
-        assert bp.stats["status"] == "optimal"
+        assert milp.status == "optimal"
+        assert bp.status == "optimal"
         assert state.violations(bp.routes) == []
         assert close(bp.stats["J"], milp.stats["J"]), (state.time, bp.stats["J"],
                                                        milp.stats["J"])
@@ -647,7 +661,7 @@ def test_arrival_cuts_lift_the_root_and_stay_below_the_brute_force_optimum() -> 
     for seed in range(16):
         instance = tiny_instance(500 + seed, n_aavs=2, n_tasks=4, max_demand=5)
         J_brute, _ = brute_force(instance)
-        plain = BranchPrice(instance, arrival_cut_rounds=0).root()
+        plain = search_of(instance, arrival_cut_rounds=0).root()
         cut = BranchPrice(instance).root()
         assert plain["converged"] and cut["converged"]
         assert plain["lp"] - 1e-9 <= cut["lp"] <= J_brute + 1e-9
@@ -665,15 +679,15 @@ def test_arrival_cut_duals_price_every_column_as_the_lp_does() -> None:
     instance = tiny_instance(510, n_aavs=2, n_tasks=4, max_demand=5)
     search = BranchPrice(instance)
     search.root()
-    _, _, duals = search.solve_lp()
-    assert {source for cuts in search.arrival_cuts.values() for row, pieces in cuts
+    _, _, duals = search.master.solve_lp()
+    assert {source for cuts in search.master.arrival_cuts.values() for row, pieces in cuts
             if duals[row] > 1e-9 for _, _, source in pieces} == {-2, -1, 0, 1}
-    lp_reduced = search.h.getSolution().col_dual
+    lp_reduced = search.master.h.getSolution().col_dual
     best_closing = 0
-    for col in search.columns:
-        prices = search.prices(col.aav, duals)
-        ours = search.reduced_cost(col, prices) - duals[search.conv[col.aav]]
-        if col.closes == search.best_closes(col, prices):
+    for col in search.master.columns:
+        prices = prices_of(search.master, col.aav, duals)
+        ours = reduced_cost(col, prices) - duals[search.master.conv[col.aav]]
+        if col.closes == best_closes(col, prices):
             assert lp_reduced[col.index] == pytest.approx(ours, abs=1e-9)
             best_closing += 1
         else:
@@ -691,8 +705,8 @@ def test_goods_time_rows_lift_the_root_and_stay_below_the_optimum(
         name: str, without: float, with_rows: float) -> None:
     instance = read_instance(REGRESSION / MANIFEST[name]["file"])
     J_star = MANIFEST[name]["J_star"]
-    plain = BranchPrice(instance, goods_time_rows=False, arrival_cut_rounds=0).root()
-    lifted = BranchPrice(instance, arrival_cut_rounds=0).root()
+    plain = search_of(instance, goods_time_rows=False, arrival_cut_rounds=0).root()
+    lifted = search_of(instance, arrival_cut_rounds=0).root()
     assert plain["converged"] and lifted["converged"]
     assert 100 * plain["lp"] / J_star == pytest.approx(without, abs=0.05)
     assert 100 * lifted["lp"] / J_star == pytest.approx(with_rows, abs=0.05)
@@ -706,13 +720,13 @@ def test_the_root_lp_is_the_same_with_the_ng_relaxation_and_dual_smoothing(
     # exact labelling must still run: a column it would find changes the LP. (Without the
     # arrival cuts: which cuts an LP gets depends on which of its optima HiGHS returns.)
     instance = tiny_instance(300 + seed, n_aavs=2, n_tasks=5, max_demand=4)
-    exact = BranchPrice(instance, ng_size=0, arrival_cut_rounds=0).root()
-    relaxed = BranchPrice(instance, ng_size=1, arrival_cut_rounds=0).root()
+    exact = search_of(instance, ng_size=0, arrival_cut_rounds=0).root()
+    relaxed = search_of(instance, ng_size=1, arrival_cut_rounds=0).root()
     assert exact["converged"] and relaxed["converged"]
     assert relaxed["lp"] == pytest.approx(exact["lp"], rel=1e-9, abs=1e-9)
     # Smoothed duals steer only the heuristic rounds; the relaxed and exact rounds, which
     # decide convergence, price the LP's own duals, so the converged LP is the same.
-    smoothed = BranchPrice(instance, ng_size=1, dual_smoothing=0.8, arrival_cut_rounds=0).root()
+    smoothed = search_of(instance, ng_size=1, dual_smoothing=0.8, arrival_cut_rounds=0).root()
     assert smoothed["converged"]
     assert smoothed["lp"] == pytest.approx(exact["lp"], rel=1e-9, abs=1e-9)
 
@@ -722,9 +736,10 @@ def test_the_large_instance_measures_switch_on_from_20_and_30_tasks() -> None:
 
     small, middle, large = (BranchPrice(generate(size, 1)) for size in ("4/10", "8/20",
                                                                           "16/40"))
-    assert (small.ng_size, small.primal_resolves, small.dual_smoothing) == (0, False, 0.0)
-    assert (middle.ng_size, middle.primal_resolves, middle.dual_smoothing) == (8, False, 0.0)
-    assert (large.ng_size, large.primal_resolves, large.dual_smoothing) == (8, True, 0.7)
-    assert large.ng_growth_rounds == 5
-    chosen = BranchPrice(generate("4/10", 1), ng_size=3, primal_resolves=True)
-    assert (chosen.ng_size, chosen.primal_resolves) == (3, True)
+    for search, decided in ((small, (0, False, 0.0)), (middle, (8, False, 0.0)),
+                            (large, (8, True, 0.7))):
+        options = search.options
+        assert (options.ng_size, options.primal_resolves, options.dual_smoothing) == decided
+    assert large.options.ng_growth_rounds == 5
+    chosen = search_of(generate("4/10", 1), ng_size=3, primal_resolves=True)
+    assert (chosen.options.ng_size, chosen.options.primal_resolves) == (3, True)

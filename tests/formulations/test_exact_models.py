@@ -16,6 +16,7 @@ from tiny import tiny_instance
 
 from tsac_bench.formulations.cpsat import solve_cpsat_isolated
 from tsac_bench.formulations.milp import (
+    MilpOptions,
     build_milp,
     canonical_warm_start,
     decode,
@@ -117,6 +118,37 @@ def test_the_tiny_optima_exercise_every_rule() -> None:
                                                 strict=True)
                                 if not instance.is_depot(v.node))
     assert all(count >= 3 for count in seen.values()), seen
+
+
+CPSAT_SIZE_SCRIPT = """
+from tsac_bench.formulations.cpsat import build_cpsat
+from tsac_bench.model.generator import generate
+
+proto = build_cpsat(generate("3/8", 3))[0].Proto()
+print(len(proto.variables), len(proto.constraints))
+"""
+
+
+def test_the_models_of_the_measured_3_8_instance_keep_their_size() -> None:
+    # generate("3/8", 3) is the instance of the LP bounds in docs/formulations.md; a block of
+    # either builder that adds or drops a variable or a row shows here. The counts are those
+    # of the models before the builders were split into blocks (the same LP file and proto).
+    import subprocess
+    import sys
+
+    from tsac_bench.model.generator import generate
+
+    instance = generate("3/8", 3)
+    full = build_milp(instance)
+    plain = build_milp(instance, options=MilpOptions(
+        symmetry=False, capacity_cuts=False, range_time_link=False, time_flow=False,
+        cover_cuts=False))
+    assert (full.nvariables(), full.nconstraints()) == (909, 1672)
+    assert (plain.nvariables(), plain.nconstraints()) == (564, 867)
+    # In a process of its own: ortools and highspy cannot share one (docs/formulations.md).
+    done = subprocess.run([sys.executable, "-c", CPSAT_SIZE_SCRIPT], capture_output=True,
+                          text=True, timeout=300, check=True)
+    assert done.stdout.split() == ["968", "2959"]
 
 
 WORKER_SCRIPT = """

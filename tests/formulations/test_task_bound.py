@@ -86,7 +86,8 @@ def test_an_exact_method_without_a_bound_reports_this_one() -> None:
     instance = tiny_instance(301, n_aavs=2, n_tasks=3, max_demand=5)
     state = PlanningState.static(instance)
     _, routes = brute_force(instance)
-    stats = _checked(state, state.evaluator(), routes, {"status": "feasible"}).stats
+    result = _checked(state, state.evaluator(), routes, {"status": "feasible"})
+    stats = result.stats
     assert stats["solver_lower_bound"] is None
-    assert stats["lower_bound"] == stats["task_bound"] == task_lower_bound(state)
-    assert stats["mip_gap"] == pytest.approx((stats["J"] - stats["lower_bound"]) / stats["J"])
+    assert result.lower_bound == stats["task_bound"] == task_lower_bound(state)
+    assert stats["mip_gap"] == pytest.approx((stats["J"] - result.lower_bound) / stats["J"])

@@ -114,19 +114,13 @@ class CoalitionGame:
         self.first_free = [state.first_free(n) for n in range(self.n_aavs)]
         self.anchors = [state.anchor(n) for n in range(self.n_aavs)]
         self.visible = sorted(state.visible)
-        self._visible_nodes = np.asarray(self.visible, dtype=int)
-        # Per visible task, in ``visible`` order: its position, demand and deadline, and the
-        # columns of DecisionView.task_features that depend on the task alone, once per game
-        # rather than once per decision.
+        self.visible_nodes = np.asarray(self.visible, dtype=int)
+        # Per visible task, in ``visible`` order: its position, demand and deadline, once
+        # per game rather than once per decision.
         self.visible_index = {m: i for i, m in enumerate(self.visible)}
-        horizon, tasks = instance.horizon, [instance.tasks[m] for m in self.visible]
+        tasks = [instance.tasks[m] for m in self.visible]
         self.visible_demand = np.array([t.demand for t in tasks], dtype=int)
         self.visible_t_end = np.array([t.t_end for t in tasks], dtype=float)
-        self._task_columns = np.array(
-            [(t.x / 1000, t.y / 1000, float(t.is_delivery), t.demand, t.t_start / horizon,
-              t.t_end / horizon, t.release / horizon) for t in tasks],
-            dtype=float).reshape(-1, 7)
-        self._dist = instance.dist_rows
         self._latest_on_time = [t.latest_on_time for t in instance.tasks]
         self._speed = [a.speed for a in instance.aavs]
         self._range = [a.max_range for a in instance.aavs]
@@ -179,7 +173,8 @@ class CoalitionGame:
     def residuals(self, n: int) -> np.ndarray:
         """Eq. 19 for AAV n over the visible tasks (``visible`` order): each task's demand
         less what the AAVs other than n bring on time, at least 0. Kept for the last
-        (AAV, structure) asked: the validity mask, the rule and the features all need it."""
+        (AAV, structure) asked: the validity mask, the rule and the learned policy's state all
+        need it."""
         key = (n, len(self.trajectory))
         if self._residuals is not None and self._residuals[0] == key:
             return self._residuals[1]
@@ -232,7 +227,7 @@ class CoalitionGame:
     def reachable(self) -> np.ndarray:
         """Per (AAV, visible task): whether the AAV reaches the task on time and within range
         from its anchor. Anchors are fixed for a game, so this is computed once."""
-        visible = self._visible_nodes
+        visible = self.visible_nodes
         legs = self.instance.dist[np.ix_([a.node for a in self.anchors], visible)]
         range_left = np.array([r - a.flown for r, a in zip(self._range, self.anchors,
                                                            strict=True)])[:, None]
@@ -257,7 +252,7 @@ class CoalitionGame:
         accepted = len(self.trajectory)
         if self._proximity is not None and self._proximity[0] == accepted:
             return self._proximity[1]
-        instance, visible = self.instance, self._visible_nodes
+        instance, visible = self.instance, self.visible_nodes
         columns = np.arange(len(visible))
         rows = list(self._proximity_rows)
         for k, anchor in enumerate(self.anchors):
@@ -398,31 +393,10 @@ class CoalitionGame:
 
 
 # --- the decision interface of selection rules ----------------------------------------
-#: Columns of ``DecisionView.agent_features`` (lengths in km, times in horizons, kg in the
-#: AAV's capacity).
-AGENT_FEATURES = ("x_km", "y_km", "time", "speed", "capacity", "range_left_km", "alpha",
-                  "lam", "free_visits", "delivery_load", "pickup_load")
-#: Columns of ``DecisionView.task_features`` (one row per visible task).
-TASK_FEATURES = ("x_km", "y_km", "is_delivery", "demand", "residual", "t_start", "t_end",
-                 "release", "coalition_size", "covered", "member", "own_amount",
-                 "distance_km", "slack", "candidate")
-#: Columns of ``DecisionView.competition_features`` (one row per visible task): the other
-#: AAVs as the deciding AAV sees them. "Nearest other" is the other AAV whose free route
-#: (anchor included) passes nearest to the task; its spare capacity is its capacity less the
-#: load it carries when it leaves that nearest node (kg); reach is the share of the other
-#: AAVs that could arrive on time and within range from their anchors; a detour cost is the
-#: operating cost (w3 C_op) of flying to the task and back from the nearest node of a free
-#: route, the cheapest over the other AAVs and the deciding AAV's own.
-COMPETITION_FEATURES = ("other_distance_km", "other_spare", "other_reach",
-                        "other_detour_cost", "own_detour_cost")
-#: Columns of ``DecisionView.depot_features``.
-DEPOT_FEATURES = ("x_km", "y_km", "distance_km")
-
-
 @dataclass(frozen=True)
 class DecisionView:
-    """What the deciding AAV sees (Eq. 20's state): itself, the visible tasks with their
-    residual demand and coalition feedback, the depots; and its candidate tasks."""
+    """What a selection rule sees: the game (its structure, the visible tasks, the
+    depots), the deciding AAV and its candidate tasks, with that AAV's Eq. 19 residuals."""
 
     game: CoalitionGame
     aav: int
@@ -449,75 +423,6 @@ class DecisionView:
 
     def earliest_arrivals(self, tasks: np.ndarray) -> np.ndarray:
         return self.game.earliest_arrivals(self.aav, tasks)
-
-    def agent_features(self) -> np.ndarray:
-        game, n = self.game, self.aav
-        aav, instance = game.instance.aavs[n], game.instance
-        anchor = self.anchor
-        x, y = instance.positions[anchor.node]
-        ff = game.first_free[n]
-        trace = game.plan.traces[n]
-        d, p = (trace.delivery_load[ff - 1], trace.pickup_load[ff - 1]) if ff else (0, 0)
-        return np.array([x / 1000, y / 1000, anchor.time / instance.horizon, aav.speed,
-                         aav.capacity, (aav.max_range - anchor.flown) / 1000, aav.alpha,
-                         aav.lam, len(trace.route) - ff, d / aav.capacity,
-                         p / aav.capacity], dtype=float)
-
-    def task_features(self) -> np.ndarray:
-        """One row per visible task (``game.visible`` order), columns ``TASK_FEATURES``."""
-        game, n = self.game, self.aav
-        anchor = self.anchor
-        index = game.visible_index
-        fixed = game._task_columns
-        distance = game.instance.dist[anchor.node, game._visible_nodes]
-        slack = game.visible_t_end - self.earliest_arrivals(game._visible_nodes)
-        members, on_time = game.plan.members, game.plan.on_time
-        coalition = np.array([(len(members[m]), on_time[m]) for m in game.visible],
-                             dtype=float).reshape(-1, 2)
-        member, own_amount, candidate = np.zeros((3, len(game.visible)))
-        for m, own in game.own_visits(n):
-            member[index[m]], own_amount[index[m]] = 1.0, own.amount
-        candidate[[index[m] for m in self.candidates]] = 1.0
-        return np.column_stack([fixed[:, :4], self.residuals(), fixed[:, 4:7], coalition,
-                                member, own_amount, distance / 1000,
-                                slack / game.instance.horizon, candidate]
-                               ).reshape(-1, len(TASK_FEATURES))
-
-    def competition_features(self) -> np.ndarray:
-        """One row per visible task (``game.visible`` order), ``COMPETITION_FEATURES``.
-        With no other AAV, the absent competitor is as far as the instance's largest
-        distance, with no spare capacity, out of reach, at the deciding AAV's cost rate."""
-        game, n = self.game, self.aav
-        instance = game.instance
-        visible = game._visible_nodes
-        dist = instance.dist
-        # The evaluator's rates (its q_n of Eq. 9 per metre, times w3): the cost rule stays
-        # with its owner.
-        rate = np.array(game.evaluator._op_per_metre) * game.evaluator.w3
-        near, spare = game.route_proximity()
-        others = np.array([k for k in range(game.n_aavs) if k != n], dtype=int)
-        own_detour = 2.0 * near[n] * rate[n]
-        if len(others) == 0:
-            d_max = float(dist.max())
-            absent = np.full(len(visible), d_max)
-            return np.column_stack([absent / 1000, np.zeros(len(visible)),
-                                    np.zeros(len(visible)), 2.0 * absent * rate[n],
-                                    own_detour]).reshape(-1, len(COMPETITION_FEATURES))
-        near_others = near[others]
-        nearest = others[near_others.argmin(axis=0)]
-        spare_nearest = spare[nearest, np.arange(len(visible))]
-        reach = game.reachable[others]
-        return np.column_stack([
-            near_others.min(axis=0) / 1000, spare_nearest, reach.mean(axis=0),
-            (2.0 * near_others * rate[others][:, None]).min(axis=0), own_detour,
-        ]).reshape(-1, len(COMPETITION_FEATURES))
-
-    def depot_features(self) -> np.ndarray:
-        instance = self.game.instance
-        row = self.game._dist[self.anchor.node]
-        return np.array([(d.x / 1000, d.y / 1000, row[k] / 1000) for k, d in
-                         zip(instance.depot_nodes, instance.depots, strict=True)],
-                        dtype=float).reshape(-1, len(DEPOT_FEATURES))
 
 
 class SelectionRule(Protocol):

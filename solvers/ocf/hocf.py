@@ -76,7 +76,8 @@ class HeuristicSelection:
 
     def choice(self, view: DecisionView, priority: Callable[[int], float]) -> int:
         """The rule given the priorities (``select``'s, or ones already computed, as the
-        teacher columns of ``tsac_env`` do for every visible task)."""
+        teacher columns of the learned policy's state do for every visible
+        task, ``solvers/tsac/features.py``)."""
         own = [m for m in view.candidates if view.is_member(m)]
         for m in own:
             if self.ineffective(view, m):

@@ -1,7 +1,7 @@
 """The networks of TSAC-OCF (paper Sec. III-B, Fig. 3): a transformer state encoder, the
 masked policy head (the actor, Eqs. 13 and 21) and a per-action Q head (the twin critics).
 
-The networks know nothing about training: ``tsac_sac`` trains them, ``tsac_ocf`` runs the
+The networks know nothing about training: ``sac`` trains them, ``policy`` runs the
 frozen actor inside the coalition game (the RL4CO split between policy and algorithm).
 
 Shapes: a batch of B states, each with up to L task tokens and up to K depot tokens.
@@ -33,7 +33,7 @@ class NetConfig:
     heads: int = 4
     layers: int = 2
     feedforward: int = 128
-    #: The version of the state and action space (``tsac_env.FEATURE_SETS``) the network
+    #: The version of the state and action space (``features.FEATURES``) the network
     #: is built for; ``pass_action``: whether a pass token leads the action space.
     features: int = 1
     pass_action: bool = False
@@ -209,7 +209,7 @@ def expectation(probs: Tensor, values: Tensor, mask: Tensor) -> Tensor:
 
 
 class State(Protocol):
-    """One unpadded state: what ``tsac_env.observe`` returns."""
+    """One unpadded state: what ``features.observe`` returns."""
 
     agent: np.ndarray
     tasks: np.ndarray

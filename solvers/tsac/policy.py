@@ -2,22 +2,21 @@
 
 The engine of ``solvers/ocf/engine.py`` plays Algorithm 1 (random AAV permutations, ADD/REMOVE,
 strict-improvement acceptance, tabu list); the selection rule here feeds the deciding AAV's
-state (Eq. 20, ``tsac_env.observe``) to the frozen networks of a policy file and decodes a
+state (Eq. 20, ``features.observe``) to the frozen networks of a policy file and decodes a
 task in one of two ways (``decode``):
 
 * ``sample``: m* ~ pi(.|s), the actor's masked distribution (Eq. 21);
-* ``margin``: HOCF's choice (the teacher column of feature set 3) unless the minimum of the
+* ``margin``: HOCF's choice (the teacher column of the state) unless the minimum of the
   run's twin critics rates another valid action more than ``margin`` J above it. Why: the
   critics of a run trained on rollout labels rank actions well only near the states they
   were trained on; a deviation they back by a wide margin pays, a close call does not
-  (reports/tsac-learnability.md measures both). With ``verify`` (a number), the policy
+  (reports/archive/tsac-learnability.md measures both). With ``verify`` (a number), the policy
   file's verifier (``solvers/tsac/verify.py``) must also rate the deviation more than
   ``verify`` J above HOCF's choice.
 
 Either way the engine's seeded generator drives the game, so a run is deterministic per seed.
 The default policy ships with the package (``solvers/tsac/policies/tsac-default.pt``, decoded
-by margin; how it was trained and measured: docs/tsac.md); ``tsac-policy-1.pt`` beside it is
-the policy shipped before it (an actor alone, feature set 1: ``decode=sample`` only).
+by margin; how it was trained and measured: docs/tsac.md).
 """
 
 from __future__ import annotations
@@ -53,11 +52,11 @@ from tsac_bench.solvers.ocf.engine import (
     OCFAllocator,
     SelectionRule,
 )
-from tsac_bench.solvers.tsac.env import (
+from tsac_bench.solvers.tsac.features import (
     AGENT_DIM,
     DEPOT_DIM,
-    FEATURE_SETS,
-    FeatureSet,
+    FEATURES,
+    TASK_DIM,
     Observation,
     action_choice,
     observe,
@@ -66,14 +65,15 @@ from tsac_bench.solvers.tsac.env import (
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, StackedHeads, collate
 
 DEFAULT_POLICY = Path(__file__).parent / "policies" / "tsac-default.pt"
-#: Version 2 adds the run's twin critics (``critics``, possibly none) and the J one unit of
-#: their values stands for (``critic_unit``); version 3 the deviation verifier (``verifier``,
-#: possibly none). Files of versions 1 (the actor alone) and 2 still load.
+#: Where ``solvers/`` sits, so that the shipped policy is named by its repository path.
+_PACKAGE_ROOT = Path(__file__).parents[2]
+#: The actor, the run's twin critics (``critics``) with the J one unit of their values
+#: stands for (``critic_unit``), and the deviation verifier (``verifier``, possibly none).
+#: Versions 1 (the actor alone) and 2 (no verifier) were those of policies shipped before.
 POLICY_FORMAT = "tsac-bench/policy@3"
-_READABLE_FORMATS = ("tsac-bench/policy@1", "tsac-bench/policy@2", POLICY_FORMAT)
 #: The margins of ``decode="margin"`` (J): the critics' and the verifier's (None: no
 #: verifier check), chosen together on generated instances apart from the evaluation's
-#: (seeds 900000..900299, reports/tsac-learnability.md, "A verifier of the critics'
+#: (seeds 900000..900299, reports/archive/tsac-learnability.md, "A verifier of the critics'
 #: deviations"); before the verifier the critics' alone, 0.75.
 MARGIN = 0.5
 VERIFY: float | None = 0.25
@@ -82,8 +82,6 @@ VERIFY: float | None = 0.25
 #: budget").
 RESTARTS = ("margin", "sample")
 RESTART = "margin"
-#: The feature set the margin rule needs: HOCF's choice is a column of its state.
-MARGIN_FEATURES = FEATURE_SETS[3]
 
 
 class PolicyFileError(TsacBenchError):
@@ -148,26 +146,24 @@ def read_policy(path: Path | str = DEFAULT_POLICY) -> Policy:
     except Exception as exc:
         raise PolicyFileError(f"{path}: cannot read the policy ({type(exc).__name__}: "
                               f"{exc})") from None
-    if not isinstance(payload, dict) or payload.get("format") not in _READABLE_FORMATS:
+    if not isinstance(payload, dict) or payload.get("format") != POLICY_FORMAT:
         raise PolicyFileError(f"{path}: format: expected {POLICY_FORMAT!r}")
-    # Files written before feature set 2 existed carry no "features": they are version 1.
     config = NetConfig(**payload["config"])
-    features = FEATURE_SETS.get(config.features)
-    if features is None:
-        raise PolicyFileError(f"{path}: config.features: feature set {config.features} is "
-                              f"unknown here (known: {', '.join(map(str, FEATURE_SETS))})")
-    shape = (AGENT_DIM, features.task_dim, DEPOT_DIM, features.pass_action)
+    if config.features != FEATURES:
+        raise PolicyFileError(f"{path}: config.features: feature set {config.features}, this "
+                              f"version builds {FEATURES}: retrain the policy")
+    shape = (AGENT_DIM, TASK_DIM, DEPOT_DIM, True)
     if (config.agent_dim, config.task_dim, config.depot_dim, config.pass_action) != shape:
         raise PolicyFileError(
             f"{path}: config: the network's inputs (agent {config.agent_dim}, task "
             f"{config.task_dim}, depot {config.depot_dim}, pass {config.pass_action}) do not "
-            f"fit feature set {features.version} of this version {shape}: retrain the policy")
+            f"fit this version's {shape}: retrain the policy")
     actor = _frozen(PolicyNet(config), payload["actor"], path, "actor")
     critics = tuple(_frozen(QNet(config), state, path, "critics")
-                    for state in payload.get("critics", ()))
+                    for state in payload["critics"])
     verifier = (_frozen(QNet(config), payload["verifier"], path, "verifier")
                 if "verifier" in payload else None)
-    return Policy(actor, critics, float(payload.get("critic_unit", 1.0)), verifier)
+    return Policy(actor, critics, float(payload["critic_unit"]), verifier)
 
 
 def _frozen(network: PolicyNet | QNet, state: dict[str, Tensor], path: Path,
@@ -199,11 +195,7 @@ def policy_at(path: str | None) -> Policy:
 def margin_problem(policy: Policy) -> str | None:
     """Why ``decode="margin"`` cannot run this policy, or None if it can."""
     if len(policy.critics) < 2:
-        return "its file carries no twin critics (train it on rollout labels)"
-    if policy.actor.config.features != MARGIN_FEATURES.version:
-        return (f"it is built for feature set {policy.actor.config.features}, the margin "
-                f"rule needs HOCF's choice in the state (feature set "
-                f"{MARGIN_FEATURES.version})")
+        return "its file carries no twin critics"
     return None
 
 
@@ -220,6 +212,18 @@ class PolicyFile(ExistingFile):
 
     def describe(self, context: Mapping[str, Any]) -> str:
         return "the path of a tsac-ocf policy file"
+
+
+class ShippedOr(NoneOr):
+    """None, which stands for the shipped policy, or a policy file ``inner`` admits."""
+
+    def describe(self, context: Mapping[str, Any]) -> str:
+        return f"none (the shipped policy) or {self.inner.describe(context)}"
+
+    def describe_default(self, value: Any) -> str:
+        if value is None:
+            return f"the shipped policy 3 ({DEFAULT_POLICY.relative_to(_PACKAGE_ROOT)})"
+        return super().describe_default(value)
 
 
 class Decoding(Options):
@@ -271,13 +275,12 @@ class PolicySelection:
     def __init__(self, actor: PolicyNet, temperature: float = 1.0) -> None:
         self.actor = actor
         self.temperature = temperature
-        self.features: FeatureSet = FEATURE_SETS[actor.config.features]
 
     def probabilities(self, view: DecisionView) -> np.ndarray:
-        """pi(.|s) over the actions (the pass first with feature set 2, then
-        ``view.game.visible``): exactly 0 outside the valid ones."""
+        """pi(.|s) over the actions (the pass first, then ``view.game.visible``): exactly 0
+        outside the valid ones."""
         with torch.inference_mode():
-            logits = self.actor(collate([observe(view, self.features)]))[0].double()
+            logits = self.actor(collate([observe(view)]))[0].double()
         if self.temperature > 0:
             return torch.softmax(logits / self.temperature, dim=-1).numpy()
         best = torch.zeros_like(logits)
@@ -286,7 +289,7 @@ class PolicySelection:
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
         p = self.probabilities(view)
-        return action_choice(view, int(rng.choice(len(p), p=p)), self.features)
+        return action_choice(view, int(rng.choice(len(p), p=p)))
 
 
 def margin_choice(values: np.ndarray, valid: np.ndarray, teacher: int, margin: float) -> int:
@@ -302,7 +305,7 @@ Confirmation = Callable[[DecisionView, Observation, int, int], bool]
 
 
 class MarginSelection:
-    """Selection rule: HOCF's choice unless ``values`` (a batch of feature-set-3 states ->
+    """Selection rule: HOCF's choice unless ``values`` (a batch of states ->
     one value per action, in J) rates another valid action more than ``margin`` above it
     and ``confirm`` (if given) confirms that deviation."""
 
@@ -312,7 +315,7 @@ class MarginSelection:
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
         del rng  # deterministic given the state: the engine's generator orders the AAVs
-        state = observe(view, MARGIN_FEATURES)
+        state = observe(view)
         with torch.inference_mode():
             values = self.values(collate([state]))[0].double().numpy()
         teacher = teacher_action(state)
@@ -320,7 +323,7 @@ class MarginSelection:
         if action != teacher and self.confirm is not None and not self.confirm(
                 view, state, action, teacher):
             action = teacher
-        return action_choice(view, action, MARGIN_FEATURES)
+        return action_choice(view, action)
 
 
 class VerifierCheck:
@@ -350,7 +353,7 @@ class TSACOCFAllocator(OCFAllocator):
 
     name = "tsac-ocf"
     setting_constraints = declare(**OCFAllocator.setting_constraints,
-                                  policy=NoneOr(PolicyFile()),
+                                  policy=ShippedOr(PolicyFile()),
                                   decode=Decoding(),
                                   temperature=Interval(float, 0, None),
                                   margin=Interval(float, 0, None),

@@ -5,7 +5,7 @@ candidates, and the margin rule acts on their maximum, so the deviations it take
 ones the critics overrate most (the optimiser's curse). Checked by rollouts (a measurement:
 each deviation the critics back by 0.3 J, completed 4 times by HOCF against HOCF's own
 choice), about half of them lose, and keeping only those the rollouts confirm turns the 0.3
-margin from 19 % above HOCF at 8/20 into 9-20 % below it (reports/tsac-learnability.md).
+margin from 19 % above HOCF at 8/20 into 9-20 % below it (reports/archive/tsac-learnability.md).
 
 The verifier learns that check, so that decoding plays one game with no rollouts:
 
@@ -41,11 +41,10 @@ from tsac_bench.planning import PlanningState, make_allocator
 from tsac_bench.planning.settings import Constraint, Interval, declare
 from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.ocf.engine import DecisionView, SelectionRule
-from tsac_bench.solvers.tsac.env import Observation
+from tsac_bench.solvers.tsac.features import Observation
 from tsac_bench.solvers.tsac.net import QNet, collate
 from tsac_bench.solvers.tsac.policy import (
     DEFAULT_POLICY,
-    MARGIN_FEATURES,
     MarginSelection,
     Policy,
     TSACOCFAllocator,
@@ -81,8 +80,8 @@ class RolloutCheck:
 
     def __call__(self, view: DecisionView, state: Observation, action: int,
                  teacher: int) -> bool:
-        finals = rollout_values(view.game, view, [action, teacher], MARGIN_FEATURES,
-                                self.completion, rollouts=self.rollouts,
+        finals = rollout_values(view.game, view, [action, teacher], self.completion,
+                                rollouts=self.rollouts,
                                 seed=int(self.rng.integers(2**31))).mean(axis=1)
         gain = float(finals[1] - finals[0])
         self.labels.append(DeviationLabel(state, action, teacher, gain, self.scale,

@@ -16,14 +16,11 @@ from tsac_bench.planning.insertion import best_insertion, removal_route
 from tsac_bench.planning.simulator import simulate
 from tsac_bench.planning.solve import solve
 from tsac_bench.solvers.ocf.engine import (
-    AGENT_FEATURES,
     C_MAX,
-    DEPOT_FEATURES,
     INIT,
     K_MAX,
     PASS,
     STRICT_DECREASE,
-    TASK_FEATURES,
     CoalitionGame,
     DecisionView,
     Move,
@@ -31,6 +28,14 @@ from tsac_bench.solvers.ocf.engine import (
 )
 from tsac_bench.solvers.ocf.hocf import HeuristicSelection
 from tsac_bench.solvers.ocf.rocf import UniformSelection
+from tsac_bench.solvers.tsac.features import (
+    AGENT_FEATURES,
+    DEPOT_FEATURES,
+    TASK_FEATURES,
+    agent_columns,
+    depot_columns,
+    task_columns,
+)
 
 
 def rule_for(name, instance):
@@ -162,13 +167,13 @@ def test_residual_demand_is_eq_19_as_each_aav_sees_it():
     game = CoalitionGame(PlanningState.static(instance), routes)
     assert [game.residual(n, 0) for n in range(3)] == [20, 10, 10]
     view = DecisionView(game, 2, tuple(game.valid_tasks(2)))
-    features = view.task_features()
+    features = task_columns(view)
     assert features.shape == (2, len(TASK_FEATURES))
     column = dict(zip(TASK_FEATURES, features[0], strict=True))
     assert column["residual"] == 10 and column["coalition_size"] == 2
     assert column["covered"] == 10 and column["member"] == 0
-    assert view.agent_features().shape == (len(AGENT_FEATURES),)
-    assert view.depot_features().shape == (2, len(DEPOT_FEATURES))
+    assert agent_columns(view).shape == (len(AGENT_FEATURES),)
+    assert depot_columns(view).shape == (2, len(DEPOT_FEATURES))
     # HOCF's ineffective-resource exit: A1's late visit does nothing, it leaves first.
     hocf = HeuristicSelection(instance, 1.0, 2.0, 1.0)
     a1 = DecisionView(game, 1, tuple(game.valid_tasks(1)))
@@ -233,8 +238,8 @@ def test_what_a_game_keeps_across_moves_equals_what_a_fresh_game_computes():
             fresh = CoalitionGame(state, game.plan.routes)
             # What the engine left for this decision first, then every AAV's.
             np.testing.assert_array_equal(
-                view.task_features(),
-                DecisionView(fresh, view.aav, view.candidates).task_features())
+                task_columns(view),
+                task_columns(DecisionView(fresh, view.aav, view.candidates)))
             assert game.valid_tasks(view.aav) == fresh.valid_tasks(view.aav)
             kept, afresh = game.route_proximity(), fresh.route_proximity()
             np.testing.assert_array_equal(kept[0], afresh[0])

@@ -1,8 +1,9 @@
-"""TSAC-OCF: the environment, the masked transformer policy, the SAC losses and training,
-and the shipped policy."""
+"""TSAC-OCF: the policy's state, the masked transformer policy, the training (its losses,
+its recipe) and the shipped policy."""
 
 from __future__ import annotations
 
+import json
 import math
 import socket
 
@@ -10,7 +11,6 @@ import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
-pytest.importorskip("gymnasium")
 
 from tsac_bench.model.evaluator import CostEvaluator  # noqa: E402
 from tsac_bench.model.generator import generate  # noqa: E402
@@ -18,26 +18,27 @@ from tsac_bench.planning import PlanningState, make_allocator  # noqa: E402
 from tsac_bench.planning.solve import solve  # noqa: E402
 from tsac_bench.solvers.ocf.engine import (  # noqa: E402
     C_MAX,
-    COMPETITION_FEATURES,
     K_MAX,
     CoalitionGame,
     DecisionView,
     sample_rng,
 )
 from tsac_bench.solvers.ocf.hocf import HeuristicSelection  # noqa: E402
-from tsac_bench.solvers.tsac.env import (  # noqa: E402
+from tsac_bench.solvers.tsac.features import (  # noqa: E402
     AGENT_DIM,
+    COMPETITION_FEATURES,
     COMPETITION_SCALE,
     DEPOT_DIM,
-    FEATURE_SETS,
+    EXTRA_TASK_FEATURES,
+    FEATURES,
     TASK_DIM,
+    TASK_FEATURES,
     Observation,
-    TaskSelectionEnv,
     action_choice,
+    action_of,
+    competition_columns,
     observe,
-    pad,
-    replan_moments,
-    unpad,
+    teacher_action,
 )
 from tsac_bench.solvers.tsac.net import (  # noqa: E402
     NetConfig,
@@ -48,46 +49,48 @@ from tsac_bench.solvers.tsac.net import (  # noqa: E402
 )
 from tsac_bench.solvers.tsac.policy import (  # noqa: E402
     DEFAULT_POLICY,
-    MARGIN_FEATURES,
     PolicyFileError,
     PolicySelection,
     TSACOCFAllocator,
     load_policy,
     margin_choice,
+    policy_meta,
     read_policy,
     save_policy,
 )
 from tsac_bench.solvers.tsac.sac import (  # noqa: E402
-    Batch,
     DiscreteSAC,
     Labelled,
     LabelledBatch,
-    LookAheadSelection,
+    ReplayBuffer,
     RolloutWorkers,
     SACConfig,
     TrainConfig,
-    Transition,
-    best_label,
     label_candidates,
+    replan_moments,
     rollout_values,
     teacher_prior_of,
     train,
 )
+from tsac_bench.solvers.tsac.verify import VerifierConfig  # noqa: E402
 
 SMALL = NetConfig(AGENT_DIM, TASK_DIM, DEPOT_DIM, d_model=16, heads=2, layers=2,
-                  feedforward=32)
-#: The policy shipped before the present one (feature set 1, the actor alone).
-POLICY_1 = DEFAULT_POLICY.parent / "tsac-policy-1.pt"
+                  feedforward=32, features=FEATURES, pass_action=True)
+#: Where the competition columns sit in a task row: after the engine-derived ones.
+COMPETITION = slice(len(TASK_FEATURES) + len(EXTRA_TASK_FEATURES),
+                    len(TASK_FEATURES) + len(EXTRA_TASK_FEATURES) + len(COMPETITION_FEATURES))
 
 
 def random_state(rng: np.random.Generator, n_tasks: int, n_depots: int,
                  valid: list[int] | None = None) -> Observation:
-    mask = np.zeros(n_tasks, dtype=bool)
-    mask[valid if valid is not None else rng.choice(n_tasks, size=max(1, n_tasks // 2),
-                                                    replace=False)] = True
+    """A state of random numbers; ``valid``: its valid actions (0 the pass, i task i - 1)."""
+    mask = np.zeros(1 + n_tasks, dtype=bool)
+    mask[valid if valid is not None else 1 + rng.choice(n_tasks, size=max(1, n_tasks // 2),
+                                                        replace=False)] = True
     return Observation(rng.normal(size=AGENT_DIM).astype(np.float32),
                        rng.normal(size=(n_tasks, TASK_DIM)).astype(np.float32),
-                       rng.normal(size=(n_depots, DEPOT_DIM)).astype(np.float32), mask)
+                       rng.normal(size=(n_depots, DEPOT_DIM)).astype(np.float32), mask,
+                       rng.normal(size=DEPOT_DIM).astype(np.float32))
 
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -99,15 +102,66 @@ def actor() -> PolicyNet:
     return PolicyNet(SMALL).eval()
 
 
+# --- the recipe of the shipped policy ------------------------------------------------------
+#: Fields of the shipped run's configuration that this version no longer has, with the value
+#: that made each a no-op there (the code paths of unshipped recipes, docs/tsac.md,
+#: "History"): the td signal, feature sets 1-2, annealed cloning, look-ahead distillation.
+RETIRED = {"signal": "rollout", "features": 3, "clone_weight": 0.0, "distill_weight": 0.0}
+#: Fields that only a retired path read: td's update rate, discount and target networks,
+#: the entropy bonus's temperature (replaced by the fixed teacher prior), the cloning
+#: schedule (its weight was 0) and the distillation's margin (its weight was 0).
+UNREAD = {"update_every", "clone_until", "clone_floor", "distill_margin", "sac.gamma",
+          "sac.tau", "sac.target_entropy_ratio", "sac.initial_alpha", "sac.alpha_lr"}
+
+
+def flat(config: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            out.update(flat(value, f"{prefix}{key}."))
+        else:
+            out[prefix + key] = value
+    return out
+
+
+def test_the_training_defaults_are_the_shipped_policys_recipe():
+    meta = policy_meta()
+    shipped = flat(meta["config"])
+    defaults = flat(json.loads(json.dumps(TrainConfig().to_dict())))
+    for key, value in RETIRED.items():
+        assert shipped.pop(key) == value, key
+    for key in UNREAD:
+        shipped.pop(key)
+    assert defaults == shipped
+    # The numbers the docs state, read from the file rather than taken on trust.
+    assert (defaults["steps"], defaults["seed"], defaults["teacher_prior"],
+            defaults["rollouts"], defaults["label_candidates"]) == (27_128, 0, 0.3, 16, 16)
+    assert meta["seed"] == 0 and meta["steps"] == 27_128
+    # Its verifier: VerifierConfig's defaults.
+    assert json.loads(json.dumps(VerifierConfig().to_dict())) == meta["verifier"]["config"]
+
+
+def test_methods_names_the_shipped_policy_as_the_default():
+    from typer.testing import CliRunner
+
+    from tsac_bench.cli import app
+
+    result = CliRunner().invoke(app, ["methods", "tsac-ocf"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0
+    policy_row = next(line for line in result.stdout.splitlines() if "policy " in line)
+    assert "the shipped policy 3 (solvers/tsac/policies/tsac-default.pt)" in policy_row
+
+
+# --- the networks --------------------------------------------------------------------------
 def test_masked_actions_get_exactly_zero_probability(actor):
     state = random_state(np.random.default_rng(1), 7, 2, valid=[1, 4, 5])
     with torch.no_grad():
         probs, log_probs = actor.distribution(collate([state]))
     probs = probs[0].numpy()
-    assert (probs[[0, 2, 3, 6]] == 0.0).all()
+    assert (probs[[0, 2, 3, 6, 7]] == 0.0).all()
     assert (probs[[1, 4, 5]] > 0).all()
     assert math.isclose(probs.sum(), 1.0, rel_tol=1e-6)
-    assert torch.isneginf(log_probs[0, [0, 2, 3, 6]]).all()
+    assert torch.isneginf(log_probs[0, [0, 2, 3, 6, 7]]).all()
 
 
 def test_padding_never_changes_the_real_tokens(actor):
@@ -116,105 +170,63 @@ def test_padding_never_changes_the_real_tokens(actor):
     alone = actor(collate([state]))[0]
     # The same state padded to 12 tasks and 4 depots by longer neighbours in the batch.
     padded = actor(collate([random_state(rng, 12, 1), state, random_state(rng, 3, 4)]))[1]
-    assert padded.shape == (12,)
-    torch.testing.assert_close(padded[:5], alone)
-    assert torch.isneginf(padded[5:]).all()
+    assert padded.shape == (13,)
+    torch.testing.assert_close(padded[:6], alone)
+    assert torch.isneginf(padded[6:]).all()
 
 
-def test_replay_loss_over_a_padded_batch_equals_the_loss_over_valid_entries():
+def test_the_losses_over_a_padded_batch_are_those_of_its_states():
     torch.manual_seed(3)
-    sac = DiscreteSAC(SMALL, SACConfig())
+    sac = DiscreteSAC(SMALL, SACConfig(), "cpu", teacher_prior=0.3)
     rng = np.random.default_rng(3)
-    transitions = []
-    for i, (m, k) in enumerate([(3, 2), (9, 3), (5, 2), (1, 1)]):
+    items = []
+    for m, k in [(3, 2), (9, 3), (5, 2), (1, 1)]:
         state = random_state(rng, m, k)
-        transitions.append(Transition(state, int(np.flatnonzero(state.action_mask)[0]),
-                                      float(rng.random()), random_state(rng, m + 1, k),
-                                      done=i == 2))
+        actions = tuple(np.flatnonzero(state.action_mask).tolist())
+        items.append(Labelled(state, actions, tuple(rng.normal(size=len(actions)).tolist())))
     with torch.no_grad():
-        batch = Batch.of(transitions, "cpu")
-        singles = [Batch.of([t], "cpu") for t in transitions]
-        critic = sac.critic_loss(batch)
-        actor_loss, entropy = sac.actor_loss(batch)
-        critic_each = torch.stack([sac.critic_loss(b) for b in singles])
-        actor_each = [sac.actor_loss(b) for b in singles]
-    torch.testing.assert_close(critic, critic_each.mean())
+        batch = LabelledBatch.of(items, "cpu")
+        singles = [LabelledBatch.of([item], "cpu") for item in items]
+        actor_loss, entropy = sac.actor_loss(batch.states)
+        actor_each = [sac.actor_loss(b.states) for b in singles]
+        # The label loss is the mean over every label of the batch.
+        counts = torch.tensor([len(item.actions) for item in items], dtype=torch.float32)
+        label_each = torch.stack([sac.label_loss(b) for b in singles])
+        label = sac.label_loss(batch)
     torch.testing.assert_close(actor_loss, torch.stack([a for a, _ in actor_each]).mean())
     torch.testing.assert_close(entropy, torch.cat([e for _, e in actor_each]))
-    assert torch.isfinite(critic) and torch.isfinite(actor_loss)
+    torch.testing.assert_close(label, (label_each * counts).sum() / counts.sum())
+    assert torch.isfinite(label) and torch.isfinite(actor_loss)
 
 
-def test_a_terminal_next_state_without_valid_actions_adds_no_value():
-    torch.manual_seed(4)
-    sac = DiscreteSAC(SMALL, SACConfig())
-    rng = np.random.default_rng(4)
-    state = random_state(rng, 4, 2)
-    terminal = Observation(state.agent, state.tasks, state.depots, np.zeros(4, dtype=bool))
-    batch = Batch.of([Transition(state, int(np.flatnonzero(state.action_mask)[0]), 0.5,
-                                 terminal, True)], "cpu")
-    with torch.no_grad():
-        q = torch.stack([c(batch.states)[0, batch.actions[0]] for c in sac.critics])
-        assert torch.isclose(sac.critic_loss(batch), ((q - 0.5) ** 2).sum())
-
-
-def test_environment_reward_is_minus_the_change_of_J():
-    env = TaskSelectionEnv(("4/10",), max_tasks=10, max_depots=2)
-    obs, info = env.reset(seed=5)
-    assert env.observation_space.contains(obs)
-    again, _ = TaskSelectionEnv(("4/10",), max_tasks=10, max_depots=2).reset(seed=5)
-    assert all(np.array_equal(obs[k], again[k]) for k in obs)
-    rng = np.random.default_rng(5)
-    start, total, done = info["J"], 0.0, False
-    while not done:
-        action = int(rng.choice(np.flatnonzero(obs["action_mask"])))
-        obs, reward, terminated, truncated, info = env.step(action)
-        assert reward >= 0.0  # Eq. 22: only strict decreases of J are accepted
-        total += reward
-        done = terminated or truncated
-    assert terminated and not obs["action_mask"].any()
-    assert math.isclose(total * 110.0, start - info["J"], rel_tol=1e-9, abs_tol=1e-9)
-    with pytest.raises(ValueError, match="not a valid task"):
-        env.reset(seed=5)
-        env.step(len(env.game.visible))  # a padding slot or beyond
-
-
-def test_a_few_hundred_updates_lower_the_critic_loss():
+def test_a_few_hundred_updates_fit_the_labels():
     torch.manual_seed(6)
-    env = TaskSelectionEnv(("4/10",), max_tasks=10, max_depots=2)
     rng = np.random.default_rng(6)
-    obs, _ = env.reset(seed=6)
-    transitions = []
-    while len(transitions) < 256:
-        state = unpad(obs)
-        action = int(rng.choice(np.flatnonzero(state.action_mask)))
-        obs, reward, terminated, truncated, _ = env.step(action)
-        transitions.append(Transition(state, action, reward, unpad(obs), terminated))
-        if terminated or truncated:
-            obs, _ = env.reset()
-    sac = DiscreteSAC(SMALL, SACConfig(batch_size=32, lr=1e-3))
-    probe = Batch.of(transitions[:128], "cpu")
+    items = []
+    for _ in range(128):
+        state = random_state(rng, int(rng.integers(2, 8)), 2)
+        actions = np.flatnonzero(state.action_mask)
+        # A label the state determines: the first column of each labelled task row.
+        items.append(Labelled(state, tuple(actions.tolist()),
+                              tuple(state.tasks[actions - 1, 0].tolist())))
+    sac = DiscreteSAC(SMALL, SACConfig(lr=1e-3), "cpu", teacher_prior=0.3)
+    probe = LabelledBatch.of(items, "cpu")
     with torch.no_grad():
-        before = sac.critic_loss(probe).item()
+        before = sac.label_loss(probe).item()
     for _ in range(150):
-        sac.update(Batch.of([transitions[i] for i in rng.integers(256, size=32)], "cpu"))
+        sac.update_from_labels(LabelledBatch.of([items[i] for i in rng.integers(128, size=32)],
+                                                "cpu"))
     with torch.no_grad():
-        after = sac.critic_loss(probe).item()
+        after = sac.label_loss(probe).item()
     assert after < 0.5 * before
 
 
-def test_training_writes_a_policy_and_resumes_from_its_checkpoint(tmp_path):
-    config = TrainConfig(steps=40, warmup=20, pretrain_updates=5, eval_every=40,
-                         eval_scale="4/10", eval_instances=1, checkpoint_every=20,
-                         curriculum=((0.0, ("4/10",)),), net=SMALL, signal="td", features=1)
-    first = train(tmp_path, config, device="cpu")
-    assert first["steps"] == 40 and len(first["evals"]) == 1
-    assert isinstance(load_policy(tmp_path / "policy.pt"), PolicyNet)
-    more = train(tmp_path, TrainConfig(steps=60), device="cpu",
-                 resume=tmp_path / "checkpoint.pt")
-    # The resumed run keeps its configuration (SMALL network, its curriculum), not the
-    # defaults passed along with the new length.
-    assert more["steps"] == 60 and more["config"]["net"]["d_model"] == SMALL.d_model
-    assert [e["step"] for e in more["evals"]] == [40, 60]
+def test_the_replay_buffer_is_a_ring():
+    buffer: ReplayBuffer[int] = ReplayBuffer(3)
+    for item in range(5):
+        buffer.add(item)
+    assert buffer.items == [3, 4, 2] and len(buffer) == 3
+    assert set(buffer.sample(20, np.random.default_rng(0))) == {2, 3, 4}
 
 
 def test_the_shipped_policy_loads_without_gpu_or_network(monkeypatch):
@@ -244,24 +256,17 @@ def test_zero_temperature_takes_the_most_probable_task():
     game = CoalitionGame(state, state.base_routes())
     n = next(n for n in range(game.n_aavs) if game.candidates(n))
     view = DecisionView(game, n, game.candidates(n))
-    for actor in (load_policy(), load_policy(POLICY_1)):
-        features = FEATURE_SETS[actor.config.features]
-        sampled = PolicySelection(actor, temperature=1.0).probabilities(view)
-        greedy = PolicySelection(actor, temperature=0.0).probabilities(view)
-        assert greedy.sum() == 1.0 and greedy[int(np.argmax(sampled))] == 1.0
-        tasks = {features.offset + game.visible.index(m) for m in view.candidates}
-        assert set(np.flatnonzero(sampled)) <= tasks | ({0} if features.pass_action else set())
+    actor = load_policy()
+    sampled = PolicySelection(actor, temperature=1.0).probabilities(view)
+    greedy = PolicySelection(actor, temperature=0.0).probabilities(view)
+    assert greedy.sum() == 1.0 and greedy[int(np.argmax(sampled))] == 1.0
+    assert set(np.flatnonzero(sampled)) <= {0} | {action_of(view, m) for m in view.candidates}
 
 
 def test_every_ocf_method_starts_alike_by_default():
     shared = ("init", "samples", "k_max", "c_max")
     settings = [make_allocator(m).settings() for m in ("hocf", "rocf", "tsac-ocf")]
     assert {tuple(s[k] for k in shared) for s in settings} == {("empty", 1, 200_000, 5_000)}
-
-
-V2 = FEATURE_SETS[2]
-SMALL_V2 = NetConfig(AGENT_DIM, V2.task_dim, DEPOT_DIM, d_model=16, heads=2, layers=2,
-                     feedforward=32, features=2, pass_action=True)
 
 
 def mid_game(scale="8/20", seed=3, decisions=15):
@@ -274,14 +279,13 @@ def mid_game(scale="8/20", seed=3, decisions=15):
     return game, DecisionView(game, n, game.candidates(n))
 
 
-def test_feature_set_2_adds_scaled_competition_columns_and_leads_with_the_pass():
+def test_the_competition_columns_are_scaled_and_the_pass_leads():
     game, view = mid_game()
-    old, new = observe(view, FEATURE_SETS[1]), observe(view, V2)
-    assert new.tasks.shape == (len(game.visible), V2.task_dim) == (len(game.visible), 25)
-    np.testing.assert_array_equal(new.tasks[:, :TASK_DIM], old.tasks)
-    raw = view.competition_features()
+    state = observe(view)
+    assert state.tasks.shape == (len(game.visible), TASK_DIM) == (len(game.visible), 27)
+    raw = competition_columns(view)
     divisor = np.array([COMPETITION_SCALE[c] for c in COMPETITION_FEATURES])
-    np.testing.assert_allclose(new.tasks[:, TASK_DIM:], raw / divisor, rtol=1e-6)
+    np.testing.assert_allclose(state.tasks[:, COMPETITION], raw / divisor, rtol=1e-6)
     # By hand for one task: the nearest other AAV, the others' reach, the detour costs.
     i = 0
     m = game.visible[i]
@@ -295,13 +299,16 @@ def test_feature_set_2_adds_scaled_competition_columns_and_leads_with_the_pass()
     assert raw[i, 3] == pytest.approx(min(2 * nearest[k] * rate[k] for k in others))
     assert raw[i, 4] == pytest.approx(2 * nearest[view.aav] * rate[view.aav])
     assert 0.0 <= raw[i, 2] <= 1.0
-    # The action rows: pass first, then the candidate tasks; the pass token is the depot
+    # The actions: the pass first, then the candidate tasks; the pass token is the depot
     # row nearest to the anchor.
-    assert new.action_mask[0] and (new.action_mask[1:] == old.action_mask).all()
-    nearest_depot = np.argmin(new.depots[:, 2])
-    np.testing.assert_array_equal(new.pass_token, new.depots[nearest_depot])
+    assert state.action_mask[0]
+    assert set(np.flatnonzero(state.action_mask[1:]) + 1) == {
+        action_of(view, m) for m in view.candidates}
+    assert all(action_choice(view, action_of(view, m)) == m for m in view.candidates)
+    nearest_depot = np.argmin(state.depots[:, 2])
+    np.testing.assert_array_equal(state.pass_token, state.depots[nearest_depot])
     game.pass_turn(view.aav)
-    assert not observe(view, V2).action_mask[0]  # a second pass under this structure
+    assert not observe(view).action_mask[0]  # a second pass under this structure
     # The per-structure cache: after more accepted moves the columns are those of a game
     # built afresh on the same routes.
     game.run(HeuristicSelection(game.instance, 1.0, 2.0, 1.0), np.random.default_rng(1),
@@ -309,22 +316,18 @@ def test_feature_set_2_adds_scaled_competition_columns_and_leads_with_the_pass()
     assert len(game.trajectory) > 1
     n = next(n for n in range(game.n_aavs) if game.candidates(n))
     fresh = CoalitionGame(game.state, game.plan.routes)
-    np.testing.assert_array_equal(
-        DecisionView(game, n, game.candidates(n)).competition_features(),
-        DecisionView(fresh, n, game.candidates(n)).competition_features())
+    np.testing.assert_array_equal(observe(DecisionView(game, n, game.candidates(n))).tasks,
+                                  observe(DecisionView(fresh, n, game.candidates(n))).tasks)
 
 
-def test_feature_set_3_adds_hocf_priority_and_choice_as_teacher_columns():
+def test_the_teacher_columns_are_hocfs_priority_and_choice():
     game, view = mid_game()
-    v3 = FEATURE_SETS[3]
-    two, three = observe(view, V2), observe(view, v3)
-    assert three.tasks.shape == (len(game.visible), v3.task_dim) == (len(game.visible), 27)
-    np.testing.assert_array_equal(three.tasks[:, :V2.task_dim], two.tasks)
-    np.testing.assert_array_equal(three.action_mask, two.action_mask)
+    state = observe(view)
     hocf = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
     choice = hocf.select(view, np.random.default_rng(7))
-    priority, chosen = three.tasks[:, -2], three.tasks[:, -1]
+    priority, chosen = state.tasks[:, -2], state.tasks[:, -1]
     assert chosen.sum() == 1.0 and game.visible[int(np.argmax(chosen))] == choice
+    assert teacher_action(state) == action_of(view, choice)
     # By hand for one task (module docstring of hocf.py): the weights 1, 2, 1 sum to 4.
     m, n, instance = game.visible[3], view.aav, game.instance
     task, anchor = instance.tasks[m], view.anchor
@@ -335,43 +338,28 @@ def test_feature_set_3_adds_hocf_priority_and_choice_as_teacher_columns():
     share = min(view.residual(m), instance.aavs[n].capacity) / task.demand
     assert priority[3] == pytest.approx((urgency + 2 * proximity + share) / 4, rel=1e-6)
     assert ((priority >= 0) & (priority <= 1)).all()
-    # Zero-padded like every other column.
-    gym_form = pad(three, 80, 8)
-    assert gym_form["tasks"].shape == (80, 27) and not gym_form["tasks"][len(game.visible):].any()
 
 
-def test_padding_never_changes_the_real_tokens_with_competition_and_pass():
+def test_padding_never_changes_the_real_tokens_of_game_states():
     torch.manual_seed(0)
-    actor = PolicyNet(SMALL_V2).eval()
-    _, view = mid_game()
-    state = observe(view, V2)
-    _, other_view = mid_game("16/40", seed=5)
-    longer = observe(other_view, V2)
+    actor = PolicyNet(SMALL).eval()
+    state = observe(mid_game()[1])
+    longer = observe(mid_game("16/40", seed=5)[1])
     assert len(longer.tasks) > len(state.tasks)
     alone = actor(collate([state]))[0]
     batch = collate([longer, state])
-    assert batch["tasks"].shape[-1] == V2.task_dim
     assert not batch["tasks"][1, len(state.tasks):].any()  # zero-padded rows
     padded = actor(batch)[1]
     width = 1 + len(state.tasks)
     torch.testing.assert_close(padded[:width], alone)
     assert torch.isneginf(padded[width:]).all()
-    # The Gymnasium form pads the same way and round-trips.
-    gym_form = pad(state, 80, 8)
-    assert gym_form["tasks"].shape == (80, V2.task_dim) and not gym_form["tasks"][
-        len(state.tasks):].any()
-    back = unpad(gym_form)
-    np.testing.assert_array_equal(back.action_mask, state.action_mask)
-    np.testing.assert_array_equal(back.pass_token, state.pass_token)
 
 
-@pytest.mark.parametrize("config", [SMALL, SMALL_V2], ids=["tasks only", "pass token"])
-def test_stacked_heads_give_each_heads_values_of_the_real_actions(config):
+def test_stacked_heads_give_each_heads_values_of_the_real_actions():
     torch.manual_seed(4)
-    heads = [QNet(config).eval() for _ in range(3)]
+    heads = [QNet(SMALL).eval() for _ in range(3)]
     stacked = StackedHeads(heads)
-    features = FEATURE_SETS[config.features]
-    states = [observe(mid_game(scale, seed)[1], features)
+    states = [observe(mid_game(scale, seed)[1])
               for scale, seed in (("8/20", 3), ("16/40", 5), ("4/10", 2))]
     for batch in ([states[0]], states):  # alone, and padded by longer and shorter states
         obs = collate(batch)
@@ -379,37 +367,22 @@ def test_stacked_heads_give_each_heads_values_of_the_real_actions(config):
             values = stacked(obs)
             assert values.shape == (3, *obs["action_mask"].shape)
             for i, state in enumerate(batch):
-                width = features.offset + len(state.tasks)
+                width = 1 + len(state.tasks)
                 for head, stacked_values in zip(heads, values, strict=True):
                     torch.testing.assert_close(stacked_values[i, :width],
                                                head(obs)[i, :width], rtol=1e-5, atol=1e-5)
+    wider = NetConfig(AGENT_DIM, TASK_DIM, DEPOT_DIM, d_model=32, heads=2, layers=2,
+                      feedforward=32, features=FEATURES, pass_action=True)
     with pytest.raises(ValueError, match="one config"):
-        StackedHeads([QNet(SMALL), QNet(SMALL_V2)])
-
-
-def test_the_environment_with_feature_set_2_passes_and_ends_stable():
-    env = TaskSelectionEnv(("4/10",), max_tasks=10, max_depots=2, features=2)
-    obs, _ = env.reset(seed=5)
-    assert env.observation_space.contains(obs) and obs["action_mask"][0] == 1
-    before = env.game.plan.routes
-    obs, reward, terminated, _, _ = env.step(0)
-    assert reward == 0.0 and env.game.plan.routes == before and not terminated
-    assert env.game.decisions[-1].op == "pass"
-    rng = np.random.default_rng(1)
-    done = False
-    while not done:
-        obs, _, terminated, truncated, _ = env.step(
-            int(rng.choice(np.flatnonzero(obs["action_mask"]))))
-        done = terminated or truncated
-    assert terminated and not obs["action_mask"].any()
+        StackedHeads([QNet(SMALL), QNet(wider)])
 
 
 def test_a_rollout_label_is_the_J_of_replaying_the_action_and_its_completion():
     game, view = mid_game()
     completion = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
-    actions = [0, *np.flatnonzero(observe(view, V2).action_mask[1:])[:3] + 1]
+    actions = [0, *np.flatnonzero(observe(view).action_mask[1:])[:3] + 1]
     before = (game.plan.routes, len(game.decisions), set(game.tabu))
-    values = rollout_values(game, view, actions, V2, completion, rollouts=2, seed=7)
+    values = rollout_values(game, view, actions, completion, rollouts=2, seed=7)
     assert (game.plan.routes, len(game.decisions), set(game.tabu)) == before  # forks only
     for i, action in enumerate(actions):
         for r in range(2):
@@ -431,80 +404,80 @@ def test_a_rollout_label_is_the_J_of_replaying_the_action_and_its_completion():
 def test_rollout_workers_give_the_same_labels_to_the_last_digit():
     game, view = mid_game()
     completion = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
-    actions = [0, *np.flatnonzero(observe(view, V2).action_mask[1:])[:4] + 1]
-    alone = rollout_values(game, view, actions, V2, completion, rollouts=3, seed=11)
+    actions = [0, *np.flatnonzero(observe(view).action_mask[1:])[:4] + 1]
+    alone = rollout_values(game, view, actions, completion, rollouts=3, seed=11)
     assert alone.shape == (5, 3) and np.ptp(alone) > 0  # rollouts that differ, in order
     with RolloutWorkers(2) as workers:
-        shared = rollout_values(game, view, actions, V2, completion, rollouts=3, seed=11,
+        shared = rollout_values(game, view, actions, completion, rollouts=3, seed=11,
                                 workers=workers)
-        look_ahead = LookAheadSelection(completion, V2, rollouts=2, workers=workers)
-        assert (look_ahead.select(view, np.random.default_rng(4))
-                == LookAheadSelection(completion, V2, rollouts=2).select(
-                    view, np.random.default_rng(4)))
     np.testing.assert_array_equal(shared, alone)
     with pytest.raises(ValueError, match="at least 2"):
         RolloutWorkers(1)
 
 
-def test_policy_files_name_their_feature_set(tmp_path):
-    assert load_policy(POLICY_1).config.features == 1  # it predates feature set 2
-    assert load_policy().config.features == 3
+@pytest.mark.parametrize("seed", range(5))
+def test_label_candidates_are_every_valid_action_or_that_many_drawn(seed):
+    rng = np.random.default_rng(seed)
+    valid = np.sort(rng.choice(40, size=int(rng.integers(2, 30)), replace=False))
+    actions = label_candidates(valid, 8, rng)
+    assert len(actions) == min(8, len(valid)) and len(set(actions.tolist())) == len(actions)
+    assert set(actions) <= set(valid) and list(actions) == sorted(actions)
+    if len(valid) <= 8:
+        assert list(actions) == list(valid)
+
+
+def test_policy_files_of_another_state_or_format_are_refused(tmp_path):
+    assert load_policy().config.features == FEATURES == 3
     torch.manual_seed(1)
-    actor = PolicyNet(SMALL_V2)
-    save_policy(actor, tmp_path / "v2.pt", {})
-    loaded = load_policy(tmp_path / "v2.pt")
-    assert loaded.config.features == 2 and loaded.config.pass_action
-    # A file whose network does not fit its feature set is refused with the reason.
-    payload = torch.load(tmp_path / "v2.pt", weights_only=True)
-    payload["config"]["features"] = 1
-    torch.save(payload, tmp_path / "mixed.pt")
-    with pytest.raises(PolicyFileError, match="do not fit feature set 1"):
-        load_policy(tmp_path / "mixed.pt")
-    payload["config"]["features"] = 9
-    torch.save(payload, tmp_path / "future.pt")
-    with pytest.raises(PolicyFileError, match="feature set 9 is unknown"):
-        load_policy(tmp_path / "future.pt")
+    save_policy(PolicyNet(SMALL), tmp_path / "p.pt", {})
+    payload = torch.load(tmp_path / "p.pt", weights_only=True)
+    payload["config"]["features"] = 2
+    torch.save(payload, tmp_path / "v2.pt")
+    with pytest.raises(PolicyFileError, match="feature set 2, this version builds 3"):
+        load_policy(tmp_path / "v2.pt")
+    payload["config"].update(features=3, task_dim=20)
+    torch.save(payload, tmp_path / "narrow.pt")
+    with pytest.raises(PolicyFileError, match=r"task 20.*do not fit"):
+        load_policy(tmp_path / "narrow.pt")
+    payload["format"] = "tsac-bench/policy@1"
+    torch.save(payload, tmp_path / "old.pt")
+    with pytest.raises(PolicyFileError, match="format: expected 'tsac-bench/policy@3'"):
+        load_policy(tmp_path / "old.pt")
     # Same seed, same plan, with the pass in play and best of 2 games.
     instance = generate("8/20", 4)
-    settings = {"policy": str(tmp_path / "v2.pt"), "decode": "sample", "samples": 2}
+    settings = {"policy": str(tmp_path / "p.pt"), "decode": "sample", "samples": 2}
     runs = [solve(instance, "tsac-ocf", seed=9, mode="dynamic", settings=settings)
             for _ in range(2)]
     assert runs[0].solution.routes == runs[1].solution.routes
     assert runs[0].evaluation.feasible and runs[0].claim_matches
 
 
-@pytest.mark.parametrize(("settings", "weights"), [
-    # From clone_weight 2 after the 1 000 warm-up decisions to the floor at clone_until.
-    ({}, [2.0, 1.0, 0.0, 0.0]),
-    ({"clone_floor": 0.5}, [2.0, 1.25, 0.5, 0.5]),
-    ({"clone_floor": 1.0, "clone_until": 0.5}, [2.0, 1.0, 1.0, 1.0]),
-    ({"clone_floor": 2.0}, [2.0, 2.0, 2.0, 2.0]),
-    # The td signal keeps its weight constant; a schedule ending by the warm-up: the floor.
-    ({"clone_floor": 0.5, "signal": "td"}, [2.0, 2.0, 2.0, 2.0]),
-    ({"clone_floor": 0.5, "clone_until": 0.1}, [0.5, 0.5, 0.5, 0.5]),
-])
-def test_the_cloning_weight_falls_from_clone_weight_to_clone_floor(settings, weights):
-    config = TrainConfig(steps=8000, warmup=1000, **settings)
-    # The warm-up's end, half-way to clone_until=1, clone_until=1, after the last step.
-    assert [config.clone_weight_at(s) for s in (1000, 4500, 8000, 9000)] == weights
+def small_run(**settings) -> TrainConfig:
+    return TrainConfig(**{"warmup": 20, "pretrain_updates": 3, "eval_every": 1000,
+                          "eval_scale": "4/10", "eval_instances": 1, "checkpoint_every": 1000,
+                          "curriculum": ((0.0, ("8/20",)),), "net": SMALL,
+                          "label_share": 0.5, "label_candidates": 3, "rollouts": 1,
+                          "replan_share": 0.0, **settings})
 
 
-def test_rollout_training_writes_a_feature_set_2_policy_and_resumes(tmp_path):
-    config = TrainConfig(steps=50, warmup=20, pretrain_updates=3, eval_every=50,
-                         eval_scale="4/10", eval_instances=1, checkpoint_every=25,
-                         curriculum=((0.0, ("4/10",)),), net=SMALL_V2, label_share=0.3,
-                         label_candidates=3, rollouts=1, replan_share=0.5)
+def test_training_writes_a_policy_and_resumes(tmp_path):
+    config = small_run(steps=50, eval_every=50, checkpoint_every=25, label_share=0.3,
+                       replan_share=0.5, curriculum=((0.0, ("4/10",)),))
     first = train(tmp_path, config, device="cpu")
     assert first["steps"] == 50 and first["labels"] and first["updates"]
-    assert load_policy(tmp_path / "policy.pt").config.features == 2
-    assert [config.clone_weight_at(s) for s in (20, 35, 50)] == [2.0, 1.0, 0.0]
+    assert len(first["evals"]) == 1 and first["pretrain"]
+    policy = read_policy(tmp_path / "policy.pt")
+    assert policy.actor.config == SMALL and len(policy.critics) == 2
     # A call that runs out of its time stops at an episode's end with a checkpoint.
     paused = train(tmp_path, TrainConfig(steps=70), device="cpu",
                    resume=tmp_path / "checkpoint.pt", stop_after=1e-9)
     assert paused["steps"] == 50
     more = train(tmp_path, TrainConfig(steps=70), device="cpu",
                  resume=tmp_path / "checkpoint.pt")
-    assert more["steps"] == 70 and more["config"]["net"]["d_model"] == SMALL_V2.d_model
+    # The resumed run keeps its configuration (SMALL network, its curriculum), not the
+    # defaults passed along with the new length.
+    assert more["steps"] == 70 and more["config"]["net"]["d_model"] == SMALL.d_model
+    assert [e["step"] for e in more["evals"]] == [50, 70]
 
 
 def test_replan_moments_are_the_states_of_simulated_dynamic_runs():
@@ -525,40 +498,6 @@ def test_replan_moments_are_the_states_of_simulated_dynamic_runs():
         moments[0].instance.name, moments[0].time, moments[0].visible)
 
 
-# --- look-ahead distillation ---------------------------------------------------------------
-def test_the_distillation_target_is_the_labelled_action_of_least_mean_final_J():
-    assert best_label([0, 3, 5], [10.0, 7.0, 9.0]) == 3
-    # A tie goes to the completion's own choice if it ties, else to the lowest index.
-    assert best_label([0, 3, 5], [10.0, 7.0, 7.0], reference=5) == 5
-    assert best_label([0, 3, 5], [10.0, 7.0, 7.0], reference=0) == 3
-    assert best_label([0, 3, 5], [10.0, 7.0, 7.0]) == 3
-    # With a margin the completion's choice stays the target unless beaten by more.
-    assert best_label([0, 3, 5], [10.0, 7.0, 7.5], reference=5, margin=0.5) == 5
-    assert best_label([0, 3, 5], [10.0, 7.0, 7.6], reference=5, margin=0.5) == 3
-    assert best_label([0, 3, 5], [10.0, 7.0, 7.6], reference=5) == 3
-
-
-def test_the_distillation_loss_is_the_cross_entropy_toward_the_least_final_J():
-    rng = np.random.default_rng(5)
-    states = [random_state(rng, 4, 2, valid=[0, 1, 3]), random_state(rng, 3, 2, valid=[1, 2]),
-              random_state(rng, 5, 2, valid=[0, 4])]
-    # Finals (10, 7, 9), (4, 4.5), (3, 3): targets 1, 1 and, on the tie, the lowest index 0.
-    items = [Labelled(states[0], (0, 1, 3), (-1.33, 1.67, -0.33), best_label([0, 1, 3],
-                                                                          [10, 7, 9])),
-             Labelled(states[1], (1, 2), (0.25, -0.25), best_label([1, 2], [4, 4.5])),
-             Labelled(states[2], (0, 4), (0.0, 0.0), best_label([0, 4], [3, 3])),
-             Labelled(states[0], (0, 1), (0.5, -0.5))]  # labelled before targets existed
-    assert [item.target for item in items] == [1, 1, 0, None]
-    sac = DiscreteSAC(SMALL, SACConfig())
-    batch = LabelledBatch.of(items, "cpu")
-    assert batch.targets.tolist() == [1, 1, 0, -1]
-    with torch.no_grad():
-        loss = sac.distill_loss(batch).item()
-        expected = -np.mean([torch.log(sac.actor.distribution(collate([s]))[0][0, t]).item()
-                             for s, t in zip(states, (1, 1, 0), strict=True)])
-    assert loss == pytest.approx(expected, rel=1e-5)
-
-
 def test_the_teacher_prior_puts_95_percent_on_hocfs_choice_and_the_rest_uniformly():
     tasks = torch.zeros((1, 3, 4))
     tasks[0, 1, -1] = 1.0  # task row 1 is the teacher's choice: action 2 after the pass
@@ -570,15 +509,11 @@ def test_the_teacher_prior_puts_95_percent_on_hocfs_choice_and_the_rest_uniforml
 
 def test_with_a_teacher_prior_the_actor_loss_is_the_kl_regularised_one():
     torch.manual_seed(0)
-    v3 = FEATURE_SETS[3]
-    net = NetConfig(AGENT_DIM, v3.task_dim, DEPOT_DIM, d_model=16, heads=2, layers=2,
-                    feedforward=32, features=3, pass_action=True)
-    sac = DiscreteSAC(net, SACConfig(), teacher_prior=0.5)
+    sac = DiscreteSAC(SMALL, SACConfig(), "cpu", teacher_prior=0.5)
     _, view = mid_game()
-    states = collate([observe(view, v3)])
-    batch = Batch(states, torch.zeros(0), torch.zeros(0), states, torch.zeros(0))
+    states = collate([observe(view)])
     with torch.no_grad():
-        loss, _ = sac.actor_loss(batch)
+        loss, _ = sac.actor_loss(states)
         probs, log_probs = sac.actor.distribution(states)
         q = torch.minimum(*(c(states) for c in sac.critics))
     valid = states["action_mask"][0]
@@ -591,82 +526,29 @@ def test_with_a_teacher_prior_the_actor_loss_is_the_kl_regularised_one():
     assert prior[choice].exp().item() == pytest.approx(0.95 + 0.05 / int(valid.sum()))
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_the_completions_choice_is_always_among_the_labelled_actions(seed):
-    rng = np.random.default_rng(seed)
-    valid = np.sort(rng.choice(40, size=int(rng.integers(2, 30)), replace=False))
-    reference = int(rng.choice(valid))
-    actions = label_candidates(valid, 8, rng, reference)
-    assert reference in actions and len(actions) == min(8, len(valid))
-    assert len(set(actions.tolist())) == len(actions) and set(actions) <= set(valid)
-    assert list(actions) == sorted(actions)
-
-
-def test_with_distillation_every_labelled_state_holds_hocfs_choice(tmp_path, monkeypatch):
-    from tsac_bench.solvers.tsac import sac as sac_module
-
-    real, seen = sac_module.rollout_values, []
-
-    def spy(game, view, actions, features, completion, **keywords):
-        hocf = HeuristicSelection(game.instance, 1.0, 2.0, 1.0).select(view, None)
-        seen.append((hocf, [action_choice(view, a, features) for a in actions]))
-        return real(game, view, actions, features, completion, **keywords)
-
-    monkeypatch.setattr(sac_module, "rollout_values", spy)
-    summary = train(tmp_path, distilling(steps=60), device="cpu")
-    assert len(seen) >= 5 and all(hocf in choices for hocf, choices in seen)
-    distilled = [u["distill_loss"] for u in summary["updates"] if "distill_loss" in u]
-    assert distilled and all(math.isfinite(d) and d > 0 for d in distilled)
-
-
-def distilling(**settings) -> TrainConfig:
-    return TrainConfig(**{"warmup": 20, "pretrain_updates": 3, "eval_every": 1000,
-                          "eval_scale": "4/10", "eval_instances": 1, "checkpoint_every": 1000,
-                          "curriculum": ((0.0, ("8/20",)),), "net": SMALL_V2,
-                          "label_share": 0.5, "label_candidates": 3, "rollouts": 1,
-                          "replan_share": 0.0, "distill_weight": 1.0, **settings})
-
-
-def test_distilled_training_is_the_same_for_the_same_seed(tmp_path):
-    first = train(tmp_path / "a", distilling(steps=40), device="cpu")
-    second = train(tmp_path / "b", distilling(steps=40), device="cpu")
-    assert first["updates"] == second["updates"] and first["episodes"] == second["episodes"]
+def test_training_is_the_same_for_the_same_seed(tmp_path):
+    first = train(tmp_path / "a", small_run(steps=40), device="cpu")
+    second = train(tmp_path / "b", small_run(steps=40), device="cpu")
+    assert first["updates"] and first["updates"] == second["updates"]
+    assert first["episodes"] == second["episodes"]
     a, b = load_policy(tmp_path / "a" / "policy.pt"), load_policy(tmp_path / "b" / "policy.pt")
     assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(),
                                                  b.state_dict().values(), strict=True))
-    other = train(tmp_path / "c", distilling(steps=40, seed=1), device="cpu")
+    other = train(tmp_path / "c", small_run(steps=40, seed=1), device="cpu")
     assert other["updates"] != first["updates"]
 
 
 def test_training_with_label_workers_is_the_same_run(tmp_path):
-    alone = train(tmp_path / "a", distilling(steps=40), device="cpu")
-    shared = train(tmp_path / "b", distilling(steps=40), device="cpu", label_workers=2)
+    alone = train(tmp_path / "a", small_run(steps=40), device="cpu")
+    shared = train(tmp_path / "b", small_run(steps=40), device="cpu", label_workers=2)
     assert alone["labels"] and shared["labels"] == alone["labels"]
     assert shared["updates"] == alone["updates"] and shared["episodes"] == alone["episodes"]
 
 
-def test_the_look_ahead_takes_the_action_of_least_rollout_J():
-    game, view = mid_game()
-    completion = HeuristicSelection(game.instance, 1.0, 2.0, 1.0)
-    look_ahead = LookAheadSelection(completion, V2, rollouts=1)
-    choice = look_ahead.select(view, np.random.default_rng(3))
-    # Replayed: the same generator draws the same rollout seed after HOCF's choice.
-    rng = np.random.default_rng(3)
-    valid = np.flatnonzero(observe(view, V2).action_mask)
-    finals = rollout_values(game, view, valid.tolist(), V2, completion, rollouts=1,
-                            seed=int(rng.integers(2**31)))[:, 0]
-    chosen = [action_choice(view, int(a), V2) for a in valid].index(choice)
-    assert finals[chosen] == finals.min() and np.ptp(finals) > 0
-
-
-SMALL_V3 = NetConfig(AGENT_DIM, MARGIN_FEATURES.task_dim, DEPOT_DIM, d_model=16, heads=2,
-                     layers=2, feedforward=32, features=3, pass_action=True)
-
-
 def margin_policy(path, critics: int = 2, unit: float = 1.0):
     torch.manual_seed(3)
-    save_policy(PolicyNet(SMALL_V3), path, {},
-                critics=[QNet(SMALL_V3) for _ in range(critics)], critic_unit=unit)
+    save_policy(PolicyNet(SMALL), path, {},
+                critics=[QNet(SMALL) for _ in range(critics)], critic_unit=unit)
     return path
 
 
@@ -685,12 +567,10 @@ def test_policy_files_carry_the_critics_in_j(tmp_path):
     state = PlanningState.static(generate("4/10", 8))
     game = CoalitionGame(state, state.base_routes())
     n = next(n for n in range(game.n_aavs) if game.candidates(n))
-    obs = collate([observe(DecisionView(game, n, game.candidates(n)), MARGIN_FEATURES)])
+    obs = collate([observe(DecisionView(game, n, game.candidates(n)))])
     first, second = (q(obs) for q in policy.critics)
     # The critics run in one stacked pass (StackedHeads): their values to float rounding.
     torch.testing.assert_close(policy.values(obs), 2.5 * torch.minimum(first, second))
-    # A version 1 file (the actor alone) still loads, without critics.
-    assert read_policy(POLICY_1).critics == ()
     assert len(read_policy(DEFAULT_POLICY).critics) == 2
 
 
@@ -718,10 +598,6 @@ def test_a_policy_the_decoding_cannot_run_is_a_bad_setting(tmp_path, data_dir):
     without = margin_policy(tmp_path / "no-critics.pt", critics=0)
     with pytest.raises(InvalidSetting, match=r"setting 'decode'.*no twin critics"):
         make_allocator("tsac-ocf", policy=str(without), decode="margin")
-    v2 = tmp_path / "v2.pt"
-    save_policy(PolicyNet(SMALL_V2), v2, {}, critics=[QNet(SMALL_V2), QNet(SMALL_V2)])
-    with pytest.raises(InvalidSetting, match="needs HOCF's choice in the state"):
-        make_allocator("tsac-ocf", policy=str(v2), decode="margin")
     with pytest.raises(InvalidSetting, match=r"got 'margin' \(its default\).*decode=sample"):
         make_allocator("tsac-ocf", policy=str(without))
     assert make_allocator("tsac-ocf", policy=str(without), decode="sample").decode == "sample"

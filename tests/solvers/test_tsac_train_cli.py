@@ -37,21 +37,17 @@ def train(*args):
 
 def test_set_fields_reach_the_training_configuration(tmp_path, trained):
     result = train("--out", tmp_path, "--steps", 4000, "--seed", 3,
-                   "--set", "signal=td", "--set", "replan_share=0", "--set", "features=1",
-                   "--set", "demonstrator=none", "--set", " clone_until = 0.5",
-                   "--set", "clone_floor=1")
+                   "--set", "replan_share=0", "--set", "rollouts=4",
+                   "--set", "demonstrator=none", "--set", " teacher_prior = 1")
     assert result.exit_code == 0, result.output
     [(out, config, _)] = trained
     assert out == tmp_path
-    assert (config.steps, config.seed, config.signal, config.replan_share, config.features,
-            config.demonstrator, config.clone_until, config.clone_floor) == (
-                4000, 3, "td", 0.0, 1, None, 0.5, 1.0)
-    assert type(config.replan_share) is float and type(config.features) is int
-    # The network is built for the feature set given: version 1 has no pass action.
-    assert (config.net.features, config.net.task_dim, config.net.pass_action) == (1, 20, False)
+    assert (config.steps, config.seed, config.replan_share, config.rollouts,
+            config.demonstrator, config.teacher_prior) == (4000, 3, 0.0, 4, None, 1.0)
+    assert type(config.replan_share) is float and type(config.rollouts) is int
     default = sac.TrainConfig()
-    assert (config.warmup, config.label_share, config.curriculum) == (
-        default.warmup, default.label_share, default.curriculum)
+    assert (config.warmup, config.label_share, config.curriculum, config.net) == (
+        default.warmup, default.label_share, default.curriculum, default.net)
 
 
 def test_without_set_the_configuration_is_the_default(tmp_path, trained):
@@ -64,19 +60,16 @@ def test_without_set_the_configuration_is_the_default(tmp_path, trained):
     ("nonsense=1", ["--set", "no settable field 'nonsense'", "replan_share"]),
     ("steps=5", ["--set", "no settable field 'steps'"]),
     ("curriculum=4/10", ["--set", "no settable field 'curriculum'"]),
-    ("signal=sarsa", ["--set", "'signal'", "'sarsa'", "'rollout', 'td'"]),
-    ("features=4", ["--set", "'features'", "'4'", "[1, 3]"]),
-    ("teacher_prior=-1", ["--set", "'teacher_prior'", "'-1'", ">= 0"]),
-    ("teacher_prior=0.3", ["--set", "teacher_prior", "teacher columns (3), not 2"]),
-    ("features=2.0", ["--set", "'features'", "an integer"]),
+    # Fields of the retired recipes (docs/tsac.md, "History") are not fields any more.
+    ("signal=td", ["--set", "no settable field 'signal'"]),
+    ("features=2", ["--set", "no settable field 'features'"]),
+    ("teacher_prior=0", ["--set", "'teacher_prior'", "'0'", "> 0"]),
+    ("rollouts=2.0", ["--set", "'rollouts'", "an integer"]),
     ("replan_share=1.5", ["--set", "'replan_share'", "[0, 1]"]),
     ("warmup=ten", ["--set", "'warmup'", "'ten'"]),
     ("demonstrator=dga", ["--set", "'demonstrator'", "'hocf', 'rocf'"]),
     ("label_scale=0", ["--set", "'label_scale'", "> 0"]),
-    ("distill_weight=-1", ["--set", "'distill_weight'", "'-1'", ">= 0"]),
-    ("distill_margin=-0.5", ["--set", "'distill_margin'", "'-0.5'", ">= 0"]),
-    ("clone_floor=2.5", ["--set", "'clone_floor'", "2.5", "[0, clone_weight=2.0]"]),
-    ("signal", ["--set", "'signal'", "expected KEY=VALUE"]),
+    ("rollouts", ["--set", "'rollouts'", "expected KEY=VALUE"]),
 ])
 def test_a_bad_set_is_one_line_naming_the_option_and_field(tmp_path, trained, pair, words):
     result = train("--out", tmp_path, "--set", pair)
@@ -87,19 +80,10 @@ def test_a_bad_set_is_one_line_naming_the_option_and_field(tmp_path, trained, pa
     assert trained == []
 
 
-def test_clone_floor_may_not_exceed_a_given_clone_weight(tmp_path, trained):
-    result = train("--out", tmp_path, "--set", "clone_weight=0.5", "--set", "clone_floor=1")
-    assert result.exit_code == 2
-    assert result.output.strip() == (
-        "error: --set: method 'TrainConfig' setting 'clone_floor': got '1'; "
-        "allowed: a number in [0, clone_weight=0.5]")
-    assert trained == []
-
-
 def test_a_field_given_twice_is_refused(tmp_path, trained):
-    result = train("--out", tmp_path, "--set", "signal=td", "--set", "signal=rollout")
+    result = train("--out", tmp_path, "--set", "rollouts=4", "--set", "rollouts=8")
     assert result.exit_code == 2
-    assert result.output.strip() == "error: --set: setting 'signal' given twice"
+    assert result.output.strip() == "error: --set: setting 'rollouts' given twice"
     assert trained == []
 
 

@@ -7,17 +7,15 @@ import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
-pytest.importorskip("gymnasium")
 
 from tsac_bench.errors import InvalidSetting  # noqa: E402
 from tsac_bench.model.generator import generate  # noqa: E402
 from tsac_bench.planning import PlanningState, make_allocator  # noqa: E402
 from tsac_bench.planning.solve import solve  # noqa: E402
 from tsac_bench.solvers.ocf.engine import C_MAX, CoalitionGame, DecisionView  # noqa: E402
-from tsac_bench.solvers.tsac.env import observe, teacher_action  # noqa: E402
+from tsac_bench.solvers.tsac.features import TASK_DIM, observe, teacher_action  # noqa: E402
 from tsac_bench.solvers.tsac.net import NetConfig, PolicyNet, QNet, collate  # noqa: E402
 from tsac_bench.solvers.tsac.policy import (  # noqa: E402
-    MARGIN_FEATURES,
     MarginSelection,
     PolicyFileError,
     TSACOCFAllocator,
@@ -39,7 +37,7 @@ from tsac_bench.solvers.tsac.verify import (  # noqa: E402
     train_verifier,
 )
 
-SMALL_V3 = NetConfig(11, MARGIN_FEATURES.task_dim, 3, d_model=16, heads=2, layers=2,
+SMALL_V3 = NetConfig(11, TASK_DIM, 3, d_model=16, heads=2, layers=2,
                      feedforward=32, features=3, pass_action=True)
 
 
@@ -47,7 +45,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def random_policy(path, verifier: bool = False, unit: float = 1.0):
-    """A feature-set-3 policy file of random networks (twin critics, maybe a verifier)."""
+    """A policy file of random networks (twin critics, maybe a verifier)."""
     torch.manual_seed(3)
     save_policy(PolicyNet(SMALL_V3), path, {"made": "test"},
                 critics=[QNet(SMALL_V3), QNet(SMALL_V3)], critic_unit=unit,
@@ -68,7 +66,7 @@ def hocf_mid_game(scale="8/20", seed=3, decisions=15):
 
 def test_a_deviation_label_is_the_rollout_gain_over_hocfs_choice():
     game, view, hocf = hocf_mid_game()
-    state = observe(view, MARGIN_FEATURES)
+    state = observe(view)
     teacher = teacher_action(state)
     others = [a for a in np.flatnonzero(state.action_mask) if a != teacher]
     labels: list[DeviationLabel] = []
@@ -76,7 +74,7 @@ def test_a_deviation_label_is_the_rollout_gain_over_hocfs_choice():
     verdicts = [check(view, state, int(a), teacher) for a in others[:3]]
     seeds = np.random.default_rng(5).integers(2**31, size=3)
     for label, verdict, action, seed in zip(labels, verdicts, others, seeds, strict=False):
-        finals = rollout_values(game, view, [int(action), teacher], MARGIN_FEATURES, hocf,
+        finals = rollout_values(game, view, [int(action), teacher], hocf,
                                 rollouts=3, seed=int(seed))
         assert label.gain == finals[1].mean() - finals[0].mean()
         assert verdict == (label.gain > 0)
@@ -107,7 +105,7 @@ def test_the_margin_rule_takes_only_the_deviations_its_check_confirms(tmp_path):
 
 def test_the_verifier_check_compares_the_deviation_with_hocfs_action_in_j():
     game, view, _ = hocf_mid_game()
-    state = observe(view, MARGIN_FEATURES)
+    state = observe(view)
     values = torch.zeros((1, len(state.action_mask)))
     values[0, 2], values[0, 0] = 1.5, 0.25
 
@@ -129,7 +127,7 @@ def test_policy_files_carry_the_verifier_in_j(tmp_path):
     assert with_it.verifier is not None and not any(
         p.requires_grad for p in with_it.verifier.parameters())
     _, view, _ = hocf_mid_game("4/10", 8, decisions=3)
-    obs = collate([observe(view, MARGIN_FEATURES)])
+    obs = collate([observe(view)])
     assert torch.equal(with_it.verified(obs), 2.0 * with_it.verifier(obs))
     assert read_policy(random_policy(tmp_path / "p.pt")).verifier is None
 

@@ -1,4 +1,4 @@
-"""The cost evaluator: feasibility and J of MODEL.md, the single source of truth.
+"""The cost evaluator: feasibility and J of docs/model.md, the single source of truth.
 
 Every cost tsac-bench prints or stores is computed here from the routes alone. Allocators
 may claim a cost; it is checked against this module, never trusted.
@@ -40,7 +40,7 @@ def cost_at_least(value: float, floor: float) -> bool:
 
 def departure(previous_arrival: float, planned_at: float | None) -> float:
     """When the AAV leaves the previous node: once it has reached it and the plan that sends
-    it on has been made (dep_k = max(tau_{k-1}, planned_at_k), MODEL.md "Time")."""
+    it on has been made (dep_k = max(tau_{k-1}, planned_at_k), docs/model.md, "Time")."""
     if planned_at is not None and planned_at > previous_arrival:
         return planned_at
     return previous_arrival
@@ -64,7 +64,7 @@ def _is_time(value: object) -> bool:
 
 @dataclass(frozen=True, slots=True)
 class FeasibilityError:
-    """One violated rule of MODEL.md, located by AAV and visit position."""
+    """One violated rule of docs/model.md, located by AAV and visit position."""
 
     code: str
     aav: str
@@ -184,7 +184,7 @@ class CostEvaluator:
 
     A planner at a re-plan of a dynamic run passes the time of the plan and each AAV's first
     free position: visits from there on are timed as planned at ``plan_time``, the stamp the
-    simulator writes on them (MODEL.md, "The dynamic run"), so that what it prices is what
+    simulator writes on them (docs/model.md, "The dynamic run"), so that what it prices is what
     will be executed. The default (0, nothing committed) is the offline model."""
 
     def __init__(self, instance: Instance, plan_time: float = 0.0,
@@ -214,6 +214,12 @@ class CostEvaluator:
         self._op_over_range = tuple(a.full_range_cost / e_base for a in aavs)
         self._start = tuple(instance.start_node(n) for n in range(len(aavs)))
         self.empty_task_cost = TaskCost(1.0, 1.0, 0.0, instance.unserved_task_cost)
+
+    @property
+    def op_per_metre(self) -> tuple[float, ...]:
+        """Per AAV, q_n of Eq. 9 per metre flown within its range, divided by E_base (w3
+        times it is the operating cost of a metre in J)."""
+        return self._op_per_metre
 
     # --- one route ---------------------------------------------------------------------
     def trace(self, n: int, route: Sequence[Visit]) -> RouteTrace:

@@ -13,7 +13,7 @@ sum over paths r through j of (t_j(r) - t_start(j)) * lambda_r, t_j(r) by Eq. 7 
 That model is exact (at an integer point lambda picks the AAV's path, whose Eq. 7 arrivals
 are its arrivals), and its LP cannot average one AAV's visit orders any more. It is not in
 the formulation because it moves the bound on one instance in five (docs/formulations.md).
-Writes reports/exact-root-bounds.md.
+Writes reports/archive/exact-root-bounds.md.
 """
 
 from __future__ import annotations
@@ -121,7 +121,8 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--sizes", nargs="+", default=["3/8", "4/10"])
     parser.add_argument("--per-size", type=int, default=5)
     parser.add_argument("--route-limit", type=int, default=100_000)
-    parser.add_argument("--out", type=Path, default=ROOT / "reports" / "exact-root-bounds.md")
+    parser.add_argument("--out", type=Path,
+                        default=ROOT / "reports" / "archive" / "exact-root-bounds.md")
     args = parser.parse_args(argv)
     lines = ["| size | seed | greedy J | " + " | ".join(f"LP: {v}" for v in VARIANTS)
              + " | paths per AAV | seconds |", "|---" * (len(VARIANTS) + 5) + "|"]

@@ -63,8 +63,8 @@ def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int
     wall = time.perf_counter() - began
     stats = outcome.stats
     row = {"size": size, "seed": seed, "method": method, "time_limit": time_limit,
-           "threads": threads, "status": stats["status"], "J": outcome.cost,
-           "lower_bound": stats["lower_bound"], "gap": stats.get("mip_gap"), "wall": wall,
+           "threads": threads, "status": outcome.status, "J": outcome.cost,
+           "lower_bound": outcome.lower_bound, "gap": stats.get("mip_gap"), "wall": wall,
            "greedy": stats.get("warm_start_J"), "root": stats.get("root_bound"),
            "commit": commit,
            **{key: stats[key] for key in (*TIME_SPLIT, "nodes", "columns", "dives",

@@ -37,7 +37,7 @@ from pathlib import Path
 import pandas as pd
 
 from tsac_bench.batch.runner import RunConfig, run_batch
-from tsac_bench.planning import is_exact_method
+from tsac_bench.planning import PlanStatus, is_exact_method, recorded_claim
 from tsac_bench.reporting.budgets import budgeted_instances, paired_difference
 from tsac_bench.reporting.data import load, per_instance, scale_order
 from tsac_bench.reporting.report import write_report
@@ -325,7 +325,7 @@ def gap_brackets(frame: pd.DataFrame, table: pd.DataFrame) -> list[str]:
     for (scale, method), rows in sorted(exact.groupby(["scale", "method"]),
                                         key=lambda g: (SCALES.index(g[0][0]), g[0][1])):
         stats = rows["stats"]
-        optimal = int(sum(s.get("status") == "optimal" for s in stats))
+        optimal = sum(recorded_claim(s)[0] == PlanStatus.OPTIMAL for s in stats)
         gaps = pd.Series([s.get("mip_gap") for s in stats], dtype=float)
         bounded = int(gaps.notna().sum())
         lines.append(f"- {scale}, `{method}`: proved {optimal} of {len(rows)} instances optimal "

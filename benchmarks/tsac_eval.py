@@ -15,7 +15,7 @@ Run by hand:
         [--jobs N]
 With ``--jobs N`` the instances of a row run in N processes, each pinned to a core of its
 own (one core each, as a plan call is timed); without, the script pins itself to one core.
-Writes reports/tsac-eval.md (or ``--out``). Held-out instances: generator seeds
+Writes reports/tsac-eval-default.md (or ``--out``). Held-out instances: generator seeds
 first-seed .. first-seed + instances - 1 (training draws its instance seeds from a generator
 seeded by the training seed; a collision with this range is a 1-in-10^5 event per instance).
 Method seed 0.
@@ -201,7 +201,7 @@ def main() -> None:
                              "repeatable, a table per reference row")
     parser.add_argument("--jobs", type=int, default=1,
                         help="worker processes, each pinned to a core of its own")
-    parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval.md"))
+    parser.add_argument("--out", type=Path, default=Path("reports/tsac-eval-default.md"))
     args = parser.parse_args()
     if not 1 <= args.jobs <= len(os.sched_getaffinity(0)):
         parser.error(f"--jobs: from 1 to the {len(os.sched_getaffinity(0))} cores to pin "

@@ -1,5 +1,5 @@
 """``exact`` (Pyomo MILP solved by HiGHS), ``exact-cpsat`` (OR-Tools CP-SAT) and ``exact-bp``
-(branch-and-price, formulations/branch_price.py): the optimum of Problem 1 behind the
+(branch-and-price, formulations/branch_price/): the optimum of Problem 1 behind the
 Allocator protocol.
 
 Both start from the ``greedy`` plan (a MIP start for HiGHS, a hint for CP-SAT) and return it
@@ -19,10 +19,11 @@ from the better of the greedy and the ``dga`` plan.
 from __future__ import annotations
 
 import time
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 from tsac_bench.errors import TsacBenchError
+from tsac_bench.formulations.branch_price.options import BranchPriceOptions
 from tsac_bench.model.evaluator import CostEvaluator, costs_agree
 from tsac_bench.planning import (
     Boolean,
@@ -99,7 +100,7 @@ class ExactAllocator(Settings):
             model = build_milp(instance, state.visible, state.committed, options, state.time)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
-            return PlanResult(start, stats)
+            return PlanResult.from_solver(start, stats)
         built = time.perf_counter() - began
         warm = False
         if self.warm_start:
@@ -161,68 +162,23 @@ class CpSatAllocator(Settings):
                         check_objective=False)
 
 
-class BranchPriceAllocator(Settings):
-    """Branch-and-price of formulations/branch_price.py (static and dynamic states)."""
+@dataclass(frozen=True)
+class BranchPriceAllocator(BranchPriceOptions, Settings):
+    """Branch-and-price of formulations/branch_price/ (static and dynamic states): every
+    field of BranchPriceOptions is a setting of this method under the same name."""
 
-    name = "exact-bp"
-    proves_optimality = True
+    name: ClassVar[str] = "exact-bp"
+    proves_optimality: ClassVar[bool] = True
     budget_use: ClassVar[str] = TIME_LIMIT
-    setting_constraints = declare(
+    setting_constraints: ClassVar[Any] = declare(
         time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
         incumbent=Options("dga", "greedy"),
-        heuristic_cap=Interval(int, 0, None),
-        columns_per_aav=Interval(int, 1, None),
-        closer_rows=Boolean(),
-        cover_cuts=Boolean(),
-        symmetry=Boolean(),
-        strong_candidates=Interval(int, 1, None),
-        strong_reliability=NoneOr(Interval(int, 0, None)),
-        time_branching=Boolean(),
-        goods_time_rows=Boolean(),
-        ng_size=NoneOr(Interval(int, 0, None)),
-        ng_growth_rounds=NoneOr(Interval(int, 0, None)),
-        primal_resolves=NoneOr(Boolean()),
-        heuristic_round_columns=Interval(int, 0, None),
-        dual_smoothing=NoneOr(Interval(float, 0, 1, closed="left")),
-        master_mip_nodes=Interval(int, 0, None),
-        dive_share=NoneOr(Interval(float, 0, 1, closed="both")),
-        arrival_cut_rounds=NoneOr(Interval(int, 0, None)),
-        columns_per_row=NoneOr(Interval(float, 0, None)),
-        threads=Interval(int, 1, None),
+        **BranchPriceOptions.setting_constraints,
     )
 
-    def __init__(self, time_limit: float | None = None, incumbent: str = "dga",
-                 heuristic_cap: int = 3, columns_per_aav: int = 30,
-                 closer_rows: bool = True, cover_cuts: bool = True, symmetry: bool = True,
-                 strong_candidates: int = 8, strong_reliability: int | None = None,
-                 time_branching: bool = True,
-                 goods_time_rows: bool = True, ng_size: int | None = None,
-                 ng_growth_rounds: int | None = None,
-                 primal_resolves: bool | None = None, heuristic_round_columns: int = 120,
-                 dual_smoothing: float | None = None, master_mip_nodes: int = 0,
-                 dive_share: float | None = None, arrival_cut_rounds: int | None = None,
-                 columns_per_row: float | None = None, threads: int = 1) -> None:
-        self.time_limit = time_limit
-        self.symmetry = symmetry
-        self.threads = threads
-        self.cover_cuts = cover_cuts
-        self.incumbent = incumbent
-        self.heuristic_cap = heuristic_cap
-        self.columns_per_aav = columns_per_aav
-        self.closer_rows = closer_rows
-        self.strong_candidates = strong_candidates
-        self.strong_reliability = strong_reliability
-        self.time_branching = time_branching
-        self.goods_time_rows = goods_time_rows
-        self.ng_size = ng_size
-        self.ng_growth_rounds = ng_growth_rounds
-        self.primal_resolves = primal_resolves
-        self.heuristic_round_columns = heuristic_round_columns
-        self.dual_smoothing = dual_smoothing
-        self.master_mip_nodes = master_mip_nodes
-        self.dive_share = dive_share
-        self.arrival_cut_rounds = arrival_cut_rounds
-        self.columns_per_row = columns_per_row
+    time_limit: float | None = None
+    #: The method whose plan, if better than greedy's, the search starts from.
+    incumbent: str = "dga"
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
@@ -241,15 +197,14 @@ class BranchPriceAllocator(Settings):
         start = min(starts, key=evaluator.cost)
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start),
                                  "warm_start_time": time.perf_counter() - began}
-        # Every setting but the limit and the start is the search's own keyword.
-        search_settings = {key: value for key, value in self.settings().items()
-                           if key not in ("time_limit", "incumbent")}
+        options = BranchPriceOptions(**{f.name: getattr(self, f.name)
+                                        for f in fields(BranchPriceOptions)})
         try:
             search = BranchPrice(instance, sorted(state.visible), state.committed, state.time,
-                                 **search_settings)
+                                 options)
         except UnsupportedPrefix as exc:
             stats.update(status="error", stop_reason=str(exc), J=stats["warm_start_J"])
-            return PlanResult(start, stats)
+            return PlanResult.from_solver(start, stats)
         remaining = None if limit is None else max(0.01, limit - (time.perf_counter() - began))
         result = search.solve(start, remaining)
         stats.update(result.stats)
@@ -287,4 +242,4 @@ def _checked(state: PlanningState, evaluator: CostEvaluator, routes: tuple,
     bound = max(b for b in (stats["solver_lower_bound"], stats["task_bound"]) if b is not None)
     stats["lower_bound"] = bound
     stats["mip_gap"] = max(0.0, J - bound) / max(abs(J), 1e-10)
-    return PlanResult(tuple(routes), stats)
+    return PlanResult.from_solver(routes, stats)

@@ -9,7 +9,7 @@ load penalty they remove (``w1 * piece / R``). The rest maps one to one:
   end depot reached from any node at the cost and duration of the leg to its nearest depot;
 * PyVRP's trip load (deliveries loaded at the depot, pickups brought back, capacity checked
   all along) is Eq. 10; hard client time windows forbid late visits (exact: late visits never
-  help, MODEL.md); waiting at an early arrival is Eq. 7.
+  help, docs/model.md, "Cost"); waiting at an early arrival is Eq. 7.
 * distances in PyVRP are *costs*: a leg into a task costs ``w3 * alpha * L[km] / E_base``,
   a leg into a depot nothing (only legs into tasks are charged). Durations are leg times in
   ``1 / TIME_SCALE`` s, rounded up so that a visit PyVRP finds on time is on time.
@@ -209,7 +209,8 @@ class _Mapping:
     def decode(self, solution) -> tuple[Route, ...]:
         """PyVRP routes back to visits after each AAV's committed prefix (closed at its origin
         depot). Adjacent pieces of one task become one visit; a later, separate return to a task
-        already in the route is dropped, since a task appears once per route (MODEL.md)."""
+        already in the route is dropped, since a task appears once per route (docs/model.md,
+        "A solution")."""
         instance = self.instance
         routes = []
         for n, closed in enumerate(self.state.base_routes()):

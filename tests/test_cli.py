@@ -1,6 +1,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -78,6 +79,45 @@ def test_solve_writes_a_solution_that_evaluates_to_the_printed_J(tmp_path, data_
     assert f"J = {claimed:.6f}" in result.output
     check = invoke("evaluate", data_dir / "hand.json", out, "--json")
     assert json.loads(check.stdout)["J"] == claimed
+
+
+QUICK = Path(__file__).resolve().parents[1] / "instances" / "quick"
+
+
+def test_solve_prints_and_keeps_an_exact_methods_status_and_bound(tmp_path):
+    # quick-2-4-s1's manifest: J* = 35.456039935500684, proven by every exact backend.
+    out = tmp_path / "exact.json"
+    result = invoke("solve", QUICK / "quick-2-4-s1.json", "--method", "exact", "--out", out)
+    assert result.exit_code == 0, result.output
+    assert "J = 35.456040" in result.output
+    assert "status optimal, lower bound 35.456040, MIP gap 0.00 %" in result.output
+    meta = json.loads(out.read_text())["meta"]
+    assert meta["status"] == "optimal"
+    assert meta["lower_bound"] == pytest.approx(35.456039935500684, rel=1e-6)
+
+
+def test_solve_prints_the_gap_of_a_time_limited_exact_run(tmp_path):
+    # No backend proves quick-4-10-s5 in a second: a plan, a bound below it and their gap.
+    out = tmp_path / "exact.json"
+    result = invoke("solve", QUICK / "quick-4-10-s5.json", "--method", "exact",
+                    "--time-limit", "0.5", "--out", out)
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    J, bound = data["cost"], data["meta"]["lower_bound"]
+    assert data["meta"]["status"] == "feasible"
+    # The manifest's best bound (1.3827, 600 s of each backend) is no weaker than this one.
+    assert 0 < bound <= 1.3826844931115687 + 1e-9 < J
+    assert (f"status feasible, lower bound {bound:.6f}, MIP gap {100 * (J - bound) / J:.2f} %"
+            in result.output)
+
+
+def test_a_heuristics_solve_shows_no_status_or_bound(tmp_path):
+    out = tmp_path / "greedy.json"
+    result = invoke("solve", QUICK / "quick-2-4-s1.json", "--method", "greedy", "--out", out)
+    assert result.exit_code == 0, result.output
+    assert "status" not in result.output and "lower bound" not in result.output
+    meta = json.loads(out.read_text())["meta"]
+    assert "status" not in meta and "lower_bound" not in meta
 
 
 def test_generate_and_info(tmp_path):

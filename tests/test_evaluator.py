@@ -106,7 +106,7 @@ def test_infeasible_routes_are_named(hand, routes, code, position):
 
 
 def test_pickup_goods_do_not_feed_a_delivery(hand):
-    # Eq. 10 as MODEL.md reads it: d and p are separate, so 10 kg picked up at T0 cannot be
+    # Eq. 10 as docs/model.md reads it: d and p are separate, so 10 kg picked up at T0 cannot be
     # delivered at T3 without a depot visit in between.
     result = CostEvaluator(hand).evaluate(plan(hand, A0=[("T0", 10), ("T3", 5), "D0"]))
     assert [(e.code, e.position) for e in result.errors] == [("no-goods", 1)]

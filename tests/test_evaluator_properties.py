@@ -1,4 +1,4 @@
-"""Properties of J that MODEL.md promises, on random feasible plans of generated instances."""
+"""Properties of J that docs/model.md promises, on random feasible plans of generated instances."""
 
 import math
 

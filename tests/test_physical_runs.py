@@ -1,4 +1,4 @@
-"""Every method's dynamic runs are physical (MODEL.md, "The dynamic run"), checked on the
+"""Every method's dynamic runs are physical (docs/model.md, "The dynamic run"), checked on the
 executed routes alone, over seeded random instances:
 
 * no AAV leaves for a visit before its ``planned_at``, nor toward a task before its release;

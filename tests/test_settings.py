@@ -191,8 +191,8 @@ def test_labels_name_converted_values():
 def test_a_file_setting_takes_an_existing_file_as_text():
     assert ExistingFile().convert(__file__) == __file__
     builtin_class("tsac-ocf")
-    with pytest.raises(InvalidSetting, match="allowed: none or the path of a tsac-ocf policy "
-                                             "file"):
+    with pytest.raises(InvalidSetting, match=r"allowed: none \(the shipped policy\) or the "
+                                             "path of a tsac-ocf policy file"):
         make_allocator("tsac-ocf", policy="no/such/policy.pt")
 
 

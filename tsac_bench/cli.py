@@ -161,7 +161,8 @@ def solve(
         "type (true, none, 0.5)")]
     = None,
 ) -> None:
-    """Run one method on one instance and print J (dynamic: also J after each re-plan).
+    """Run one method on one instance and print J (dynamic: also J after each re-plan); an
+    exact method's static run also its status, lower bound and gap.
 
     --time-limit caps each plan call; --budget is what each plan call spends."""
     from tsac_bench.model.io import read_instance, write_solution
@@ -186,6 +187,8 @@ def solve(
         console.print(table)
     console.print(f"{instance.name}  {spec.label}  {mode}  J = {outcome.cost:.6f}  "
                   f"({outcome.wall_time:.3f} s)")
+    if outcome.status is not None:
+        console.print(_claims_line(outcome))
     if budget is not None:
         console.print(_budget_line(outcome))
     if polish:
@@ -195,6 +198,14 @@ def solve(
         console.print(f"{instance.name}  {spec.label}+polish  J = {solution.cost:.6f}")
     if out is not None:
         write_solution(solution, instance, out)
+
+
+def _claims_line(outcome: Any) -> str:
+    """What the method proves about its plan: its status, lower bound and MIP gap (J - LB) / J."""
+    if outcome.lower_bound is None:
+        return f"status {outcome.status}, no lower bound"
+    return (f"status {outcome.status}, lower bound {outcome.lower_bound:.6f}, MIP gap "
+            f"{100 * outcome.gap:.2f} %")
 
 
 def _budget_line(outcome: Any) -> str:
@@ -259,10 +270,27 @@ def verify(
     only: Annotated[list[str] | None, typer.Option(help="instance name(s) to check")] = None,
     time_limit: Annotated[float | None, typer.Option(help="seconds per solve")] = 600.0,
     threads: Annotated[int, typer.Option(min=1)] = 1,
+    plans_only: Annotated[bool, typer.Option(
+        "--plans-only", help="only re-evaluate the stored best-known plans (seconds for a "
+        "whole set), re-solve nothing")] = False,
 ) -> None:
-    """Re-solve a directory's instances and compare with its manifest (exit 1 on failure)."""
+    """Re-evaluate a directory's best-known plans, then re-solve its instances and compare
+    with its manifest (exit 1 on failure)."""
+    from tsac_bench.batch import best_known
     from tsac_bench.batch.verify import verify as run_verify
 
+    plans = [c for c in best_known.check(directory) if not only or c.instance in only]
+    if plans:
+        table = Table("instance", "best J", "plan's J", "result")
+        for p in plans:
+            table.add_row(p.instance, _number(p.stored), _number(p.evaluated),
+                          "pass" if p.passed else f"FAIL {p.problem}")
+        console.print(table)
+        console.print(f"{sum(p.passed for p in plans)}/{len(plans)} best-known plans passed")
+    if plans_only:
+        if not plans or not all(p.passed for p in plans):
+            raise typer.Exit(1)
+        return
     checks = run_verify(directory, method or None, time_limit, only, threads)
     table = Table("instance", "method", "J*", "J", "lower bound", "status", "time (s)",
                   "result")
@@ -274,7 +302,7 @@ def verify(
     console.print(table)
     failed = sum(not c.passed for c in checks)
     console.print(f"{len(checks) - failed}/{len(checks)} passed")
-    if failed or not checks:
+    if failed or not checks or not all(p.passed for p in plans):
         raise typer.Exit(1)
 
 
@@ -433,6 +461,57 @@ def results_summary(run_dir: Annotated[Path, typer.Argument(metavar="RUN_DIR")])
     _print_summary(run_dir)
 
 
+bks_app = typer.Typer(help="Best-known plans and bounds of instance sets, kept in their "
+                      "manifests.", no_args_is_help=True)
+app.add_typer(bks_app, name="bks")
+
+
+@bks_app.command("update")
+@user_errors
+def bks_update(
+    run_dir: Annotated[Path, typer.Argument(metavar="RUN_DIR")],
+    instance_set: Annotated[list[Path] | None, typer.Option(
+        "--set", help="instance directory to update (default: those of the run's jobs)")]
+    = None,
+) -> None:
+    """Take a run's better plans (re-evaluated, stamps removed) and higher bounds in."""
+    from tsac_bench.batch import best_known
+
+    changes = best_known.update(run_dir, instance_set or None, note=say_error)
+    for c in changes:
+        was = "none" if c.before is None else f"{c.before:.6f}"
+        console.print(f"{c.instance}: {c.what} {was} -> {c.after:.6f} ({c.by})")
+    console.print(f"{len(changes)} improvement(s)")
+
+
+@bks_app.command("bound")
+@user_errors
+def bks_bound(directory: Annotated[Path, typer.Argument(metavar="DIR")]) -> None:
+    """Give every instance of DIR at least the tasks-on-their-own bound."""
+    from tsac_bench.batch import best_known
+
+    console.print(f"{best_known.add_task_bounds(directory)} bound(s) raised")
+
+
+@bks_app.command("show")
+@user_errors
+def bks_show(directory: Annotated[Path, typer.Argument(metavar="DIR")]) -> None:
+    """Print DIR's best-known J, bound, gap and who found each."""
+    from tsac_bench.batch import best_known
+
+    table = Table("instance", "best J", "bound", "gap", "proved", "found by", "bound by")
+    for row in best_known.table(directory):
+        table.add_row(row["instance"], _number(row["best_J"]), _number(row["lower_bound"]),
+                      "-" if row["gap"] is None else f"{100 * row['gap']:.1f} %",
+                      "yes" if row["proved"] else "no", row["found_by"] or "-",
+                      row["bound_by"] or "-")
+    console.print(table)
+
+
+def _number(value: float | None) -> str:
+    return "-" if value is None else f"{value:.6f}"
+
+
 @app.command("report")
 @user_errors
 def report_command(
@@ -454,7 +533,7 @@ def train(
                                       "curve.json, curve.png")],
     device: Annotated[str, typer.Option(help="auto, cpu or cuda")] = "auto",
     steps: Annotated[int | None, typer.Option(min=1, help="environment steps (decisions) "
-                                              "in all; default 16000")] = None,
+                                              "in all; default the shipped policy's")] = None,
     seed: Annotated[int, typer.Option()] = 0,
     resume: Annotated[Path | None, typer.Option(help="a checkpoint.pt to continue from")]
     = None,
@@ -467,10 +546,11 @@ def train(
         "--resume from")] = None,
     setting: Annotated[list[str] | None, typer.Option(
         "--set", metavar="FIELD=VALUE", help="a scalar field of the training configuration "
-        "(TrainConfig), repeatable, e.g. --set signal=td --set replan_share=0; not with "
+        "(TrainConfig), repeatable, e.g. --set rollouts=4 --set replan_share=0; not with "
         "--resume, which keeps the checkpoint's configuration")] = None,
 ) -> None:
-    """Train the TSAC-OCF task-selection policy (discrete SAC, docs/tsac.md)."""
+    """Train the TSAC-OCF task-selection policy; the defaults are the shipped policy's
+    recipe (docs/tsac.md)."""
     from tsac_bench.planning.settings import config_from_settings, parse_setting_pairs
 
     if device not in ("auto", "cpu", "cuda"):
@@ -509,7 +589,7 @@ def train(
         bar = progress.add_task("train", total=steps, info="")
 
         def on_step(step: int, stats: dict[str, float]) -> None:
-            info = " ".join(f"{k}={stats[k]:.3g}" for k in ("critic_loss", "alpha",
+            info = " ".join(f"{k}={stats[k]:.3g}" for k in ("critic_loss", "entropy",
                                                              "eval_ratio_hocf") if k in stats)
             progress.update(bar, completed=step, info=info)
 

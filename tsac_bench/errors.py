@@ -10,7 +10,7 @@ class TsacBenchError(Exception):
 
 
 class ModelError(TsacBenchError, ValueError):
-    """Data that breaks the model (MODEL.md), with the path of the offending field."""
+    """Data that breaks the model (docs/model.md), with the path of the offending field."""
 
     def __init__(self, field: str, message: str) -> None:
         super().__init__(f"{field}: {message}")

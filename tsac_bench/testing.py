@@ -29,7 +29,7 @@ from pathlib import Path
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind
-from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.evaluator import CostEvaluator, cost_at_least
 from tsac_bench.model.generator import AAV_TYPES, generate
 from tsac_bench.model.io import read_solution, write_solution
 from tsac_bench.planning import ALL_MODES, Allocator, MethodUnavailable, supported_modes
@@ -155,6 +155,9 @@ def _run(method: str | Allocator, instance: Instance, mode: str, *, seed: int = 
     assert outcome.cost == fresh.J == outcome.solution.cost
     assert outcome.claim_matches, (f"the method claims J = {outcome.claimed_cost}, the "
                                    f"evaluator computes {outcome.cost}")
+    if outcome.lower_bound is not None:
+        assert cost_at_least(outcome.cost, outcome.lower_bound), (
+            f"the method claims a lower bound {outcome.lower_bound} above J = {outcome.cost}")
     return outcome
 
 
@@ -209,6 +212,8 @@ def allocator_checks(method: str | Allocator, *,
             write_solution(outcome.solution, instance, path)
             again = read_solution(path, instance)
         assert CostEvaluator(instance).cost(again) == outcome.cost == again.cost
+        assert (again.meta.get("status"), again.meta.get("lower_bound")) == (
+            outcome.status, outcome.lower_bound), "the solution file keeps status and bound"
 
     for mode in ALL_MODES:
         for label, instance in instances.items():

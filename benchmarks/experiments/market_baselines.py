@@ -2,9 +2,9 @@
 scales (Fig. 7), on generated instances, static mode (every task known at t = 0).
 
 Run by hand, one at a time (the development machine has 2 shared cores):
-    python benchmarks/market_baselines.py --instances 10
-    python benchmarks/market_baselines.py --methods greedy,cnp,dga,rocf,hocf   # once merged
-Writes reports/market-baselines.md. Every J is the evaluator's, recomputed by ``solve``.
+    python benchmarks/experiments/market_baselines.py --instances 10
+    python benchmarks/experiments/market_baselines.py --methods greedy,cnp,dga,rocf,hocf
+Writes reports/archive/market-baselines.md. Every J is the evaluator's, recomputed by ``solve``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def main() -> None:
     parser.add_argument("--instances", type=int, default=10, help="instances per scale")
     parser.add_argument("--first-seed", type=int, default=0, help="generator seed of the first")
     parser.add_argument("--seed", type=int, default=0, help="the methods' seed")
-    parser.add_argument("--out", type=Path, default=Path("reports/market-baselines.md"))
+    parser.add_argument("--out", type=Path, default=Path("reports/archive/market-baselines.md"))
     args = parser.parse_args()
     methods = args.methods.split(",")
     scales = args.scales.split(",")
@@ -45,7 +45,7 @@ def main() -> None:
                       f"t={outcome.wall_time:.2f}s", file=sys.stderr, flush=True)
 
     reference = methods[0]
-    command = "python benchmarks/market_baselines.py " + " ".join(
+    command = "python benchmarks/experiments/market_baselines.py " + " ".join(
         [f"--methods {args.methods}", f"--scales {args.scales}",
          f"--instances {args.instances}", f"--first-seed {args.first_seed}",
          f"--seed {args.seed}"])

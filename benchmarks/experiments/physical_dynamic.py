@@ -1,7 +1,8 @@
 """Dynamic mean J of every method before and after the physical dynamic run (issue 15).
 
-    python benchmarks/physical_dynamic.py run --out results/physical-dynamic/after [--per-scale 20]
-    python benchmarks/physical_dynamic.py write BEFORE_DIR AFTER_DIR
+    python benchmarks/experiments/physical_dynamic.py run --out results/physical-dynamic/after \
+        [--per-scale 20]
+    python benchmarks/experiments/physical_dynamic.py write BEFORE_DIR AFTER_DIR
 
 ``run`` runs the reproduction's heuristics (benchmarks/paper_reproduction.py) in dynamic mode,
 seed 0, on the first ``--per-scale`` instances (by seed) of each scale of
@@ -17,9 +18,13 @@ their release (the issue's independent check).
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import pandas as pd
+
+# paper_reproduction is a tool of benchmarks/, one folder up from the experiments.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from paper_reproduction import OUR_METHODS, PAPER_METHODS, SCALES, instance_files
 
 import tsac_bench
@@ -28,7 +33,7 @@ from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.io import read_instance, read_solution
 from tsac_bench.reporting.data import load, per_instance
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run(args: argparse.Namespace) -> None:

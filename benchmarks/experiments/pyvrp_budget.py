@@ -1,29 +1,33 @@
 """PyVRP at fixed time budgets against every other method (static mode).
 
-    python benchmarks/pyvrp_budget.py [--per-scale 5] [--budgets 1 10]
+    python benchmarks/experiments/pyvrp_budget.py [--per-scale 5] [--budgets 1 10]
 
 Runs ``pyvrp`` with no iteration cap (only the time budget stops it) on the first instances
 of each scale of ``instances/paper-mc/`` and compares its J with the other methods' static J
 on the same instances from the reproduction store (run benchmarks/paper_reproduction.py
-first). Writes reports/pyvrp-budget.md.
+first). Writes reports/archive/pyvrp-budget.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import platform
+import sys
 import time
 from pathlib import Path
 
 import pandas as pd
-from paper_reproduction import instance_files  # a sibling script: benchmarks/ is sys.path[0]
+
+# paper_reproduction is a tool of benchmarks/, one folder up from the experiments.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from paper_reproduction import instance_files
 
 from tsac_bench.model.io import read_instance
 from tsac_bench.planning.solve import solve
 from tsac_bench.reporting.data import load
 from tsac_bench.solvers.pyvrp_peer import PyVRPAllocator
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCALES = ("4/10", "8/20", "16/40", "32/80")
 STORE = ROOT / "results" / "paper-reproduction"
 
@@ -33,7 +37,8 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--per-scale", type=int, default=5)
     parser.add_argument("--budgets", type=float, nargs="+", default=[1.0, 10.0])
-    parser.add_argument("--out", type=Path, default=ROOT / "reports" / "pyvrp-budget.md")
+    parser.add_argument("--out", type=Path,
+                        default=ROOT / "reports" / "archive" / "pyvrp-budget.md")
     args = parser.parse_args()
     rows = []
     for scale in SCALES:
@@ -57,7 +62,8 @@ def main() -> None:
     walls = both.pivot_table(index="method", columns="scale", values="wall", aggfunc="mean")
     columns = [s for s in SCALES if s in means.columns]
     lines = ["# PyVRP at fixed budgets (static mode)", "",
-             f"Command: `python benchmarks/pyvrp_budget.py --per-scale {args.per_scale} "
+             "Command: `python benchmarks/experiments/pyvrp_budget.py "
+             f"--per-scale {args.per_scale} "
              f"--budgets {' '.join(f'{b:g}' for b in args.budgets)}`  ",
              f"Machine: {platform.machine()}, 2 cores shared with other work; first "
              f"{args.per_scale} instances per scale of instances/paper-mc; other methods' J "

@@ -1,6 +1,6 @@
 """Where does deviating from HOCF pay, and can a policy learn it? (issue 17)
 
-Every policy trained with HOCF in its state (reports/tsac-teacher.md) follows HOCF in about
+Every policy trained with HOCF in its state (reports/archive/tsac-teacher.md) follows HOCF in about
 99 % of its states, and its deviations are no better than random ones, while the one-step
 look-ahead that its rollout labels encode is 13 % below HOCF at 16/40. Two measurements
 separate "the labels carry no signal" from "the signal is there but not learnable":
@@ -13,7 +13,8 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
   noise-free one-step gain of its choice) and the correlation of the two labellings'
   advantages.
 
-      python benchmarks/tsac_learnability.py repeat --scale 16/40 --instances 10 [--workers 2]
+      python benchmarks/experiments/tsac_learnability.py repeat --scale 16/40 --instances 10 \
+          [--workers 2]
 
 * ``held-out``: the labelled states of training runs (their checkpoints, in run order),
   split by time; two models learn each action's advantage over HOCF's choice from the first
@@ -23,7 +24,8 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
   action where it predicts a gain above ``tau``; the table gives the mean gain in J per
   state (against HOCF's label), trained on a quarter, half and all of the first share.
 
-      python benchmarks/tsac_learnability.py held-out results/teacher-kl-0.3-long [RUN ...]
+      python benchmarks/experiments/tsac_learnability.py held-out \
+          results/teacher-kl-0.3-long [RUN ...]
 
 * ``margin``: what a training run's values are worth in whole games. HOCF's game (dynamic
   mode, the first instances of ``instances/paper-mc/``) in which each decision deviates from
@@ -37,7 +39,8 @@ separate "the labels carry no signal" from "the signal is there but not learnabl
   instance, with the J each row spends on unmet demand. ``--first-seed`` plays generated
   instances instead, apart from the evaluation's, to choose tau on.
 
-      python benchmarks/tsac_learnability.py margin results/teacher-kl-0.3-r16-long --scale 32/80
+      python benchmarks/experiments/tsac_learnability.py margin \
+          results/teacher-kl-0.3-r16-long --scale 32/80
 
 Each prints its table (markdown) last.
 """
@@ -71,7 +74,7 @@ if TYPE_CHECKING:  # torch is loaded where it is used
     import torch
 
     from tsac_bench.planning.solve import SolveOutcome
-    from tsac_bench.solvers.tsac.env import Observation
+    from tsac_bench.solvers.tsac.features import Observation
     from tsac_bench.solvers.tsac.sac import Labelled, RolloutWorkers
 
 TAUS = (0.0, 0.25, 0.5, 1.0)
@@ -93,7 +96,7 @@ class Advantages:
     @classmethod
     def of(cls, item: Labelled) -> Advantages | None:
         """None where HOCF's choice was not labelled or nothing else was."""
-        from tsac_bench.solvers.tsac.env import teacher_action
+        from tsac_bench.solvers.tsac.features import teacher_action
 
         reference = teacher_action(item.state)
         if reference not in item.actions or len(item.actions) < 2:
@@ -127,6 +130,16 @@ def deviation_gain(predicted: Sequence[np.ndarray], true: Sequence[np.ndarray],
 # ----------------------------------------------------------------------------- repeat
 
 
+def with_reference(valid: np.ndarray, most: int, rng: np.random.Generator,
+                   reference: int) -> np.ndarray:
+    """The actions to label, ascending: every valid one if at most ``most``, otherwise
+    ``reference`` (HOCF's) and ``most`` - 1 others drawn uniformly."""
+    if len(valid) <= most:
+        return valid
+    others = rng.choice(valid[valid != reference], most - 1, replace=False)
+    return np.sort(np.append(others, reference))
+
+
 class RepeatedLabels:
     """Selection rule: HOCF's choice; in a share of the states with two or more candidate
     actions, labels up to ``candidates`` of them (HOCF's among them) twice, with independent
@@ -134,24 +147,21 @@ class RepeatedLabels:
 
     def __init__(self, hocf: SelectionRule, *, share: float, candidates: int, rollouts: int,
                  workers: RolloutWorkers | None = None) -> None:
-        from tsac_bench.solvers.tsac.env import FEATURE_SETS
-
         self.hocf, self.share, self.candidates = hocf, share, candidates
         self.rollouts, self.workers = rollouts, workers
-        self.features = FEATURE_SETS[2]
         self.pairs: list[tuple[np.ndarray, np.ndarray]] = []
 
     def select(self, view: DecisionView, rng: np.random.Generator) -> int:
-        from tsac_bench.solvers.tsac.env import observe
-        from tsac_bench.solvers.tsac.sac import label_candidates, reference_action, rollout_values
+        from tsac_bench.solvers.tsac.features import action_of, observe
+        from tsac_bench.solvers.tsac.sac import rollout_values
 
-        valid = np.flatnonzero(observe(view, self.features).action_mask)
-        reference = reference_action(view, self.hocf, self.features, rng)
+        valid = np.flatnonzero(observe(view).action_mask)
+        reference = action_of(view, self.hocf.select(view, rng))
         if len(valid) > 1 and rng.random() < self.share:
-            actions = label_candidates(valid, self.candidates, rng, reference).tolist()
+            actions = with_reference(valid, self.candidates, rng, reference).tolist()
             where = actions.index(reference)
             first, second = (
-                -rollout_values(view.game, view, actions, self.features, self.hocf,
+                -rollout_values(view.game, view, actions, self.hocf,
                                 rollouts=self.rollouts, seed=int(rng.integers(2**31)),
                                 workers=self.workers).mean(axis=1)
                 for _ in range(2))

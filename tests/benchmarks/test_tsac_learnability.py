@@ -1,4 +1,4 @@
-"""The learnability diagnostic (benchmarks/tsac_learnability.py) on hand-made labels."""
+"""The learnability diagnostic (benchmarks/experiments/tsac_learnability.py) on hand-made labels."""
 
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks" / "experiments"))
 import tsac_learnability as tl
 
 pytest.importorskip("torch")
-from tsac_bench.solvers.tsac.env import FEATURE_SETS, Observation, teacher_action
+from tsac_bench.solvers.tsac.features import TASK_DIM, Observation, teacher_action
 from tsac_bench.solvers.tsac.sac import Labelled
 
-WIDTH = FEATURE_SETS[3].task_dim
+WIDTH = TASK_DIM
 
 
 def observation(tasks: np.ndarray) -> Observation:
@@ -125,7 +125,7 @@ def test_margin_selection_plays_hocfs_game_when_it_keeps_or_values_the_teachers_
 
     from tsac_bench.model.generator import generate
     from tsac_bench.planning.solve import solve
-    from tsac_bench.solvers.tsac.env import TEACHER_CHOICE_COLUMN
+    from tsac_bench.solvers.tsac.features import TEACHER_CHOICE_COLUMN
 
     def teacher_column(obs: dict[str, torch.Tensor]) -> torch.Tensor:
         choice = obs["tasks"][..., TEACHER_CHOICE_COLUMN]
@@ -154,7 +154,7 @@ def test_agree_and_veto_are_the_critics_restricted_as_documented() -> None:
     from tsac_bench.solvers.tsac.sac import DiscreteSAC, TrainConfig
 
     torch.manual_seed(0)
-    config = TrainConfig(features=3, teacher_prior=0.3, label_scale=2.0)
+    config = TrainConfig(teacher_prior=0.3, label_scale=2.0)
     sac = DiscreteSAC(config.net, config.sac, "cpu", config.teacher_prior)
     scores = tl.run_scores({"config": config.to_dict(), "sac": sac.state_dict()})
     rng = np.random.default_rng(1)

@@ -215,9 +215,10 @@ def test_the_pivot_by_hand(run_dir):
         r" & (16.7) & (18.8)\rlap{$^b$} \\",  # 3/6: (95 - 80) / 80 on i3, the one with J*
         r"B & \textbf{85.00} & 80.00 \\[-2pt]",
         r" & (13.3) & (6.2)\rlap{$^b$} \\",
-        # C: i4 only (fewer instances: never bold), gap to its bound (66 - 60) / 60.
+        # C: i4 only (fewer instances: never bold), no J*: at least the gap to the best J
+        # known, exact's (66 - 65) / 65, at most the gap to its bound, (66 - 60) / 60.
         r"C & -- & 66.00\rlap{$^a$} \\[-2pt]",
-        r" &  & ($\leq$10.0) \\",
+        r" &  & [1.5, 10.0] \\",
         r"exact & -- & \textbf{72.50} \\[-2pt]",
         r" &  & (0.0)\rlap{$^b$} \\",
     ]
@@ -228,7 +229,7 @@ def test_the_pivot_by_hand(run_dir):
                                                 "----------------------:"],
                      ["A", "87.50 (16.7)", "83.00 (18.8, part)"],
                      ["B", "**85.00** (13.3)", "80.00 (6.2, part)"],
-                     ["C", "--", "66.00 n=1 (≤ 10.0)"],
+                     ["C", "--", "66.00 n=1 [1.5, 10.0]"],
                      ["exact", "--", "**72.50** (0.0, part)"]]
     assert PIVOT_NOTE_MARKDOWN in markdown
 

@@ -15,7 +15,7 @@ from tsac_bench.batch.worker import execute_job
 from tsac_bench.errors import UnknownMethodError
 from tsac_bench.model.io import read_instance, read_solution
 from tsac_bench.planning.solve import solve
-from tsac_bench.reporting.data import per_instance
+from tsac_bench.reporting.data import per_instance, references
 
 COMPARED = ["key", "instance", "scale", "method", "mode", "seed", "status", "J", "J_load",
             "J_time", "J_op", "solution_file"]
@@ -163,6 +163,44 @@ def test_manifest_references_give_gaps(tmp_path, two_instances):
     assert pd.isna(table.at["quick-2-5-s2", "gap"])
     assert table.at["quick-2-5-s2", "gap_lb"] == pytest.approx(1.0, rel=1e-12)
     assert table.at["quick-2-4-s1", "seeds"] == 2
+
+
+def test_an_exact_jobs_status_and_bound_reach_the_store_and_the_references(tmp_path,
+                                                                           two_instances):
+    # No manifest here: J* comes from the run. instances/quick's manifest has quick-2-4-s1's
+    # J* = 35.456039935500684 and quick-2-5-s2's 0.2246342465841162.
+    out = tmp_path / "run"
+    outcome = run_batch(RunConfig([two_instances], out, methods=["exact"], mode="static",
+                                  jobs=1), note=lambda line: None, progress=False)
+    assert (outcome.ran, outcome.failed) == (2, 0)
+    stored = rows_by_key(out)["quick-2-4-s1|exact|static|0"]["stats"]
+    assert stored["status"] == "optimal"
+    assert stored["lower_bound"] == pytest.approx(35.456039935500684, rel=1e-6)
+    with ResultStore(out) as store:
+        refs = references(store.frame())
+    assert list(refs["J_star_source"]) == ["exact run", "exact run"]
+    assert list(refs["J_star"]) == pytest.approx([35.456039935500684, 0.2246342465841162],
+                                                 rel=1e-6)
+    assert (refs["lower_bound"] <= refs["J_star"] * (1 + 1e-6)).all()
+
+
+def test_a_jobs_spec_and_row_share_its_identity_and_the_row_is_the_stores_columns(
+        two_instances):
+    from tsac_bench.batch.records import JobIdentity, JobRow
+    from tsac_bench.batch.runner import load_instances, plan_jobs, resolve_methods
+    from tsac_bench.batch.store import COLUMNS
+
+    assert JobRow.__required_keys__ | JobRow.__optional_keys__ == set(COLUMNS)
+    loaded, _ = load_instances([two_instances / "quick-2-4-s1.json"])
+    methods, _ = resolve_methods(["hocf:k_max=3"])
+    job = plan_jobs(loaded, methods, ["static"], 1, None, budgets=[0.5])[0]
+    identity = JobIdentity.__required_keys__ | JobIdentity.__optional_keys__
+    assert {key: job.spec[key] for key in identity} == {key: job.row[key] for key in identity}
+    assert {key: job.row[key] for key in identity} == {
+        "key": "quick-2-4-s1|hocf:k_max=3|static|0|budget=0.5",
+        "instance_file": str(two_instances / "quick-2-4-s1.json"), "mode": "static",
+        "seed": 0, "settings": {"k_max": 3}, "time_limit": 0.5, "budget": 0.5}
+    assert (job.spec["method"], job.row["method"]) == ("hocf", "hocf:k_max=3")
 
 
 def test_a_malformed_manifest_is_reported_and_the_run_goes_on(tmp_path, two_instances):

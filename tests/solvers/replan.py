@@ -8,7 +8,7 @@ from tsac_bench.planning.simulator import committed_prefixes
 
 
 def replan_state(instance: Instance, routes: tuple[Route, ...], t: float) -> PlanningState:
-    """MODEL.md's committed prefixes at ``t`` > 0 and the tasks released by ``t``."""
+    """docs/model.md's committed prefixes at ``t`` > 0 and the tasks released by ``t``."""
     evaluator = CostEvaluator(instance)
     traces = [evaluator.trace(n, route) for n, route in enumerate(routes)]
     return PlanningState(instance, t, instance.released_by(t),

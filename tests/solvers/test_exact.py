@@ -35,8 +35,8 @@ MANIFEST = json.loads((REGRESSION / "manifest.json").read_text())["instances"]
 #: Instances both backends prove within a second or two: the default suite's subset.
 FAST = ["reg-static-2-4-s1", "reg-static-2-5-s3", "reg-release-2-4-s12",
         "reg-release-2-5-s11", "reg-release-3-5-s11"]
-STATS = {"status", "objective", "lower_bound", "mip_gap", "solver", "solver_version",
-         "threads", "seed", "wall_time", "stop_reason", "J"}
+STATS = {"objective", "mip_gap", "solver", "solver_version", "threads", "seed", "wall_time",
+         "stop_reason", "J"}
 
 
 def regression(name: str):
@@ -50,11 +50,11 @@ def test_both_backends_reproduce_the_manifest_optimum(name: str) -> None:
     for allocator in (ExactAllocator(), CpSatAllocator()):
         result = allocator.plan(PlanningState.static(instance), seed=0)
         assert set(result.stats) >= STATS
-        assert result.stats["status"] == "optimal"
+        assert result.status == "optimal"
         J = CostEvaluator(instance).cost(result.routes)
         assert pytest.approx(J_star, rel=1e-6) == J
         assert result.stats["J"] == pytest.approx(J, rel=1e-12)
-        assert result.stats["lower_bound"] <= J + 1e-6
+        assert result.lower_bound <= J + 1e-6
     # HiGHS's own objective is the evaluator's J of the decoded routes.
     result = ExactAllocator().plan(PlanningState.static(instance))
     assert result.stats["objective"] == pytest.approx(result.stats["J"], rel=1e-6)
@@ -116,9 +116,9 @@ def test_a_time_limited_run_returns_a_plan_and_a_bound(allocator) -> None:
     instance = read_instance(QUICK / "quick-4-10-s5.json")
     result = allocator.plan(PlanningState.static(instance))
     J = CostEvaluator(instance).cost(result.routes)
-    assert result.stats["status"] in ("optimal", "feasible")
-    assert result.stats["lower_bound"] is not None
-    assert result.stats["lower_bound"] <= J + 1e-9
+    assert result.status in ("optimal", "feasible")
+    assert result.lower_bound is not None
+    assert result.lower_bound <= J + 1e-9
     assert result.stats["warm_start_J"] + 1e-9 >= J
     assert result.stats["mip_gap"] >= 0
 
@@ -131,7 +131,7 @@ def test_fixing_a_prefix_of_an_optimal_plan_keeps_the_optimum() -> None:
     state = PlanningState(instance, 100.0, frozenset(range(instance.n_tasks)), committed)
     result = ExactAllocator().plan(state)
     assert state.violations(result.routes) == []
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert result.stats["J"] == pytest.approx(MANIFEST[name]["J_star"], rel=1e-6)
 
 
@@ -158,8 +158,10 @@ def test_a_dynamic_state_is_solved_over_its_visible_tasks_after_its_prefixes() -
 def test_verify_passes_on_the_manifest_and_fails_on_a_wrong_optimum(tmp_path: Path) -> None:
     names = FAST[:2]
     entries = {n: MANIFEST[n] for n in names}
+    (tmp_path / "best-known").mkdir()
     for entry in entries.values():
-        shutil.copy(REGRESSION / entry["file"], tmp_path / entry["file"])
+        for file in (entry["file"], entry["best_plan"]):
+            shutil.copy(REGRESSION / file, tmp_path / file)
     manifest = {"format": "tsac-bench/manifest@1", "instances": entries}
     (tmp_path / "manifest.json").write_text(json.dumps(manifest))
     runner = CliRunner()
@@ -167,6 +169,7 @@ def test_verify_passes_on_the_manifest_and_fails_on_a_wrong_optimum(tmp_path: Pa
     assert ok.exit_code == 0, ok.output
     checks = len(names) * 2  # the two backends that proved each J* re-prove it
     assert f"{checks}/{checks} passed" in ok.output
+    assert f"{len(names)}/{len(names)} best-known plans passed" in ok.output
     assert exact_methods() == ["exact", "exact-bp", "exact-cpsat"]
     other = runner.invoke(app, ["verify", str(tmp_path), "--method", "exact-bp"])
     assert other.exit_code == 0, other.output
@@ -200,7 +203,7 @@ def test_exact_lets_another_aav_join_a_task_committed_in_a_prefix():
         (Depot("D0", 0, 0),), (Task("T0", 1000, 0, TaskKind.PICKUP, 20, 0, 3600),))
     state = PlanningState(instance, 1.0, frozenset({0}), ((Visit(0, 10),), ()))
     result = ExactAllocator(time_limit=30).plan(state)
-    assert result.stats["status"] == "optimal"
+    assert result.status == "optimal"
     assert result.routes == ((Visit(0, 10), Visit(1)), (Visit(0, 10), Visit(1)))
     assert CostEvaluator(instance).cost(result.routes) == pytest.approx(
         10 * 50 / 3600 + 2 * 10 / 800, rel=1e-12)

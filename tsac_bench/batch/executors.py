@@ -15,6 +15,7 @@ from collections.abc import Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from tsac_bench.batch.records import JobResult, JobSpec
 from tsac_bench.batch.worker import (
     execute_job,
     failure,
@@ -22,9 +23,6 @@ from tsac_bench.batch.worker import (
     kill_group,
     run_in_subprocess,
 )
-
-Spec = dict[str, Any]
-Result = dict[str, Any]
 
 
 def _serve(conn: Connection, log: str | None) -> None:
@@ -56,10 +54,10 @@ class _Worker:
         self.process = context.Process(target=_serve, args=(child, log))
         self.process.start()
         child.close()
-        self.spec: Spec | None = None
+        self.spec: JobSpec | None = None
         self.deadline = float("inf")
 
-    def start(self, spec: Spec) -> None:
+    def start(self, spec: JobSpec) -> None:
         self.spec = spec
         timeout = hard_timeout(spec)
         self.deadline = float("inf") if timeout is None else time.monotonic() + timeout
@@ -87,8 +85,8 @@ def _context() -> Any:
     return context
 
 
-def run_local(specs: Iterable[Spec], jobs: int,
-              log: str | os.PathLike[str] | None = None) -> Iterator[tuple[Spec, Result]]:
+def run_local(specs: Iterable[JobSpec], jobs: int,
+              log: str | os.PathLike[str] | None = None) -> Iterator[tuple[JobSpec, JobResult]]:
     """Run the jobs on ``jobs`` local worker processes; their output is appended to ``log``
     (inherited from the driver when None)."""
     log = None if log is None else os.fspath(log)
@@ -125,7 +123,7 @@ def run_local(specs: Iterable[Spec], jobs: int,
                 worker.kill()
 
 
-def _collect(worker: _Worker) -> Result | None:
+def _collect(worker: _Worker) -> JobResult | None:
     """The worker's result if its job has ended (finished, crashed or timed out), else None."""
     assert worker.spec is not None
     if worker.conn.poll():
@@ -145,8 +143,8 @@ def _collect(worker: _Worker) -> Result | None:
     return None
 
 
-def run_dask(specs: Iterable[Spec], jobs: int,
-             scheduler: str | None = None) -> Iterator[tuple[Spec, Result]]:
+def run_dask(specs: Iterable[JobSpec], jobs: int,
+             scheduler: str | None = None) -> Iterator[tuple[JobSpec, JobResult]]:
     """Run the jobs on a dask.distributed cluster: the one at ``scheduler``, or a LocalCluster
     of ``jobs`` single-threaded worker processes. Each job runs in a child process of its Dask
     worker (``worker.run_in_subprocess``) so that a hung job can be killed."""

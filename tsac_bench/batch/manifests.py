@@ -24,6 +24,9 @@ ENTRY_FIELDS = ("file", "J_star", "lower_bound", "status")
 #: A file of this name marks an instance set as a sweep (hundreds of instances): walking a
 #: parent directory skips it; naming the set itself runs it.
 SWEEP_MARKER = ".sweep"
+#: The folder beside a manifest that holds its best-known plans (batch/best_known.py): solution
+#: files, never instances.
+PLAN_FOLDER = "best-known"
 
 
 @dataclass(frozen=True)
@@ -33,6 +36,8 @@ class Reference:
     J_star: float | None = None
     lower_bound: float | None = None
     source: str | None = None
+    #: The lowest J of any plan found (``best_known``); a report's gap where J* is unknown.
+    best_J: float | None = None
 
 
 @dataclass
@@ -57,7 +62,7 @@ class Manifest:
 
     def references(self) -> dict[str, Reference]:
         return {name: Reference(_number(entry.get("J_star")), _number(entry.get("lower_bound")),
-                                "manifest")
+                                "manifest", _number(entry.get("best_J")))
                 for name, entry in self.entries.items()}
 
 
@@ -104,7 +109,8 @@ def read_manifest(directory: Path) -> Manifest:
         if missing:
             manifest.problems.append((f"instances.{name}.{missing[0]}", "missing"))
             continue
-        wrong = [key for key in ("J_star", "lower_bound") if not _is_number_or_null(entry[key])]
+        wrong = [key for key in ("J_star", "lower_bound", "best_J")
+                 if not _is_number_or_null(entry.get(key))]
         if wrong:
             manifest.problems.append((f"instances.{name}.{wrong[0]}",
                                       f"expected a finite number or null, got {entry[wrong[0]]!r}"))
@@ -123,7 +129,8 @@ def write_manifest(manifest: Manifest) -> None:
 
 def iter_instance_files(paths: list[Path]) -> list[Path]:
     """Instance files under the given files or directories (recursive, sorted; no manifests,
-    no files starting with ``_``, no sweep sets below a given directory)."""
+    no files starting with ``_``, no best-known plans, no sweep sets below a given
+    directory)."""
     found: list[Path] = []
     for path in paths:
         if not path.is_dir():
@@ -133,6 +140,7 @@ def iter_instance_files(paths: list[Path]) -> list[Path]:
         found.extend(
             p for p in sorted(path.rglob("*.json"))
             if not p.name.startswith("_") and p.name != MANIFEST_NAME
+            and p.parent.name != PLAN_FOLDER
             and not any(parent in sweeps for parent in p.parents)
         )
     return found

@@ -29,6 +29,7 @@ from tsac_bench.batch.manifests import (
     read_manifest,
     sweep_sets_below,
 )
+from tsac_bench.batch.records import JobIdentity, JobResult, JobRow, JobSpec
 from tsac_bench.batch.store import OK, ResultStore, job_key
 from tsac_bench.batch.worker import GRACE_SECONDS, hard_timeout
 from tsac_bench.errors import InputError, TsacBenchError
@@ -81,8 +82,8 @@ class LoadedInstance:
 class Job:
     """One job: ``spec`` goes to a worker, ``row`` is the part of its record known up front."""
 
-    spec: dict[str, Any]
-    row: dict[str, Any]
+    spec: JobSpec
+    row: JobRow
     loaded: LoadedInstance
 
 
@@ -187,22 +188,20 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec]
             for mode, seed, budget in itertools.product(
                     [m for m in modes if m in modes_of_method], range(seeds),
                     budgets or [None, *set_budgets(loaded, method)]):
-                key = job_key(instance.name, method.label, mode, seed, budget)
-                limit = own_limit if budget is None else budget
-                spec = {"key": key, "instance": loaded.data, "instance_file": str(loaded.path),
-                        "method": method.name, "mode": mode, "seed": seed,
-                        "time_limit": limit, "budget": budget,
-                        "settings": dict(method.settings), "grace": grace}
-                row = {"key": key, "instance": instance.name,
-                       "instance_set": loaded.instance_set,
-                       "instance_file": str(loaded.path), "scale": instance.scale,
-                       "n_aavs": instance.n_aavs, "n_tasks": instance.n_tasks,
-                       "method": method.label, "mode": mode, "seed": seed,
-                       "settings": dict(method.settings), "time_limit": limit,
-                       "budget": budget,
-                       "J_star": loaded.reference.J_star,
-                       "lower_bound": loaded.reference.lower_bound,
-                       "reference": loaded.reference.source}
+                identity = JobIdentity(
+                    key=job_key(instance.name, method.label, mode, seed, budget),
+                    instance_file=str(loaded.path), mode=mode, seed=seed,
+                    settings=dict(method.settings),
+                    time_limit=own_limit if budget is None else budget, budget=budget)
+                spec = JobSpec(**identity, instance=loaded.data, method=method.name,
+                               grace=grace)
+                row = JobRow(**identity, instance=instance.name,
+                             instance_set=loaded.instance_set, scale=instance.scale,
+                             n_aavs=instance.n_aavs, n_tasks=instance.n_tasks,
+                             method=method.label, J_star=loaded.reference.J_star,
+                             lower_bound=loaded.reference.lower_bound,
+                             best_J=loaded.reference.best_J,
+                             reference=loaded.reference.source)
                 jobs.append(Job(spec, row, loaded))
     # Longest jobs first: a slow exact job started last would leave the other cores idle.
     jobs.sort(key=lambda j: -(hard_timeout(j.spec) or float("inf")))
@@ -223,7 +222,7 @@ def set_budgets(loaded: LoadedInstance, method: MethodSpec) -> tuple[float, ...]
 
 
 # --- recording ---------------------------------------------------------------------------
-def record_result(store: ResultStore, job: Job, result: dict[str, Any]) -> str:
+def record_result(store: ResultStore, job: Job, result: JobResult) -> str:
     """Write one finished job (solution file, then its row); returns its status.
 
     The stored J is recomputed here by the evaluator from the solution as written to the file,
@@ -231,13 +230,12 @@ def record_result(store: ResultStore, job: Job, result: dict[str, Any]) -> str:
     from tsac_bench.model.evaluator import CostEvaluator
     from tsac_bench.model.io import solution_from_dict, write_solution
 
-    row = {**job.row, "status": result["status"], "message": result["message"],
-           "detail": result.get("detail") or None, "runtime": result["runtime"],
-           "stats": result["stats"], "versions": result["versions"],
-           "host": result["host"], "over_budget": result.get("over_budget"),
-           "J": None, "J_load": None, "J_time": None, "J_op": None,
-           "solution_file": None,
-           "finished_at": datetime.now(UTC).isoformat(timespec="seconds")}
+    row = JobRow(**job.row, status=result["status"], message=result["message"],
+                 detail=result.get("detail") or None, runtime=result["runtime"],
+                 stats=result["stats"], versions=result["versions"], host=result["host"],
+                 over_budget=result.get("over_budget"), J=None, J_load=None, J_time=None,
+                 J_op=None, solution_file=None,
+                 finished_at=datetime.now(UTC).isoformat(timespec="seconds"))
     if result["status"] == OK:
         instance = job.loaded.instance
         solution = solution_from_dict(result["solution"], instance, job.row["key"])
@@ -275,7 +273,7 @@ class RunConfig:
     grace: float = GRACE_SECONDS
 
 
-def execute(config: RunConfig, specs: list[dict[str, Any]]) -> Iterator[tuple[dict, dict]]:
+def execute(config: RunConfig, specs: list[JobSpec]) -> Iterator[tuple[JobSpec, JobResult]]:
     from tsac_bench.batch.executors import run_dask, run_local
 
     if config.executor == "local":
@@ -365,7 +363,7 @@ def record_calibration(store: ResultStore, note: Callable[[str], None]) -> None:
 _ABSENT = object()
 
 
-def changed_settings(rows: Iterable[dict[str, Any]], methods: Sequence[MethodSpec],
+def changed_settings(rows: Iterable[JobRow], methods: Sequence[MethodSpec],
                      keys: set[str]) -> list[str]:
     """One note per method whose recorded ok jobs among ``keys`` ran with other settings than
     the method takes today (a default changed since, e.g. a new shipped policy): resuming

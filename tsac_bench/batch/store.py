@@ -20,6 +20,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from tsac_bench.batch.records import JobRow
 from tsac_bench.errors import InputError, TsacBenchError
 from tsac_bench.planning.settings import file_label, format_value
 
@@ -28,7 +29,8 @@ DB_NAME = "results.sqlite"
 OK = "ok"
 SOLUTIONS_DIR = "solutions"
 
-#: Column name -> SQLite type. JSON columns hold text and come back as Python objects.
+#: Column name -> SQLite type: the keys of ``records.JobRow``. JSON columns hold text and
+#: come back as Python objects.
 COLUMNS: dict[str, str] = {
     "key": "TEXT PRIMARY KEY",
     "instance": "TEXT NOT NULL",
@@ -53,6 +55,7 @@ COLUMNS: dict[str, str] = {
     "J_op": "REAL",
     "J_star": "REAL",
     "lower_bound": "REAL",
+    "best_J": "REAL",  # the manifest's best-known J (batch/best_known.py)
     "reference": "TEXT",  # where J_star / lower_bound came from
     "runtime": "REAL",  # seconds the method planned (solve's wall time)
     "stats": "TEXT",  # JSON
@@ -103,7 +106,7 @@ class ResultStore:
         self.close()
 
     # --- writing ---------------------------------------------------------------------------
-    def record(self, row: Mapping[str, Any]) -> None:
+    def record(self, row: JobRow) -> None:
         """Insert or replace one job's row, in one transaction."""
         unknown = set(row) - set(COLUMNS)
         if unknown:
@@ -150,7 +153,7 @@ class ResultStore:
             args = wanted
         return {key for (key,) in self._conn.execute(query, args)}
 
-    def rows(self) -> list[dict[str, Any]]:
+    def rows(self) -> list[JobRow]:
         """Every job's row, sorted by key, JSON columns decoded."""
         cursor = self._conn.execute("SELECT * FROM jobs ORDER BY key")
         names = [d[0] for d in cursor.description]

@@ -21,27 +21,25 @@ from tsac_bench.batch.manifests import (
     write_manifest,
 )
 from tsac_bench.model.evaluator import cost_at_least, costs_agree
-from tsac_bench.planning import exact_methods
+from tsac_bench.planning import PlanStatus, exact_methods
 
 #: Solver stats copied into the manifest (wall times are informative only).
-RECORDED = ("status", "J", "lower_bound", "mip_gap", "solver", "solver_version", "threads",
-            "seed", "wall_time", "stop_reason")
+RECORDED = ("mip_gap", "solver", "solver_version", "threads", "seed", "wall_time",
+            "stop_reason")
 
 
 def solve_exact(path: Path, method: str, time_limit: float | None, threads: int = 1,
                 seed: int = 0) -> dict[str, Any]:
-    """One exact backend on one instance file; the stats of its PlanResult plus J and the
-    time limit it ran under."""
+    """One exact backend on one instance file, as a manifest records it: its status, J and
+    lower bound, some of its stats (``RECORDED``) and the time limit it ran under."""
     from tsac_bench.model.io import read_instance
     from tsac_bench.planning.solve import solve
 
     instance = read_instance(path)
     outcome = solve(instance, method, seed=seed, time_limit=time_limit,
                     settings={"threads": threads})
-    stats = {k: outcome.stats.get(k) for k in RECORDED}
-    stats["J"] = outcome.cost
-    stats["time_limit"] = time_limit
-    return stats
+    return {"status": outcome.status, "J": outcome.cost, "lower_bound": outcome.lower_bound,
+            **{k: outcome.stats.get(k) for k in RECORDED}, "time_limit": time_limit}
 
 
 def entry_from(results: dict[str, dict[str, Any]], file: str, command: str) -> dict[str, Any]:
@@ -49,7 +47,7 @@ def entry_from(results: dict[str, dict[str, Any]], file: str, command: str) -> d
     that proves it and no disagreement: the other provers reach the same J, and every
     backend's J is no lower and its bound no higher (status "conflict" otherwise: a defect
     of a backend, to be looked into)."""
-    optimal = {m: r for m, r in results.items() if r["status"] == "optimal"}
+    optimal = {m: r for m, r in results.items() if r["status"] == PlanStatus.OPTIMAL}
     best = min(r["J"] for r in results.values())
     J_star = min((r["J"] for r in optimal.values()), default=None)
     agreed = J_star is not None and all(costs_agree(r["J"], J_star) for r in optimal.values()) \
@@ -109,7 +107,7 @@ class Check:
     J_star: float | None
     J: float
     lower_bound: float | None
-    status: str
+    status: PlanStatus | None
     wall_time: float
     passed: bool
     reason: str
@@ -131,19 +129,19 @@ def verify(directory: Path, methods: Sequence[str] | None = None,
         if wanted is not None and name not in wanted:
             continue
         provers = [m for m, r in entry.get("solvers", {}).items()
-                   if r.get("status") == "optimal" and m in installed]
+                   if r.get("status") == PlanStatus.OPTIMAL and m in installed]
         chosen = methods if methods is not None else (
             provers if entry["J_star"] is not None and provers else installed)
         for method in chosen:
             r = solve_exact(directory / entry["file"], method, time_limit, threads)
             J, bound, status = r["J"], r["lower_bound"], r["status"]
             J_star = entry["J_star"]
-            if status == "error":
+            if status == PlanStatus.ERROR:
                 passed, reason = False, f"solver error: {r['stop_reason']}"
             elif J_star is None:
                 passed = cost_at_least(J, entry["lower_bound"])
                 reason = "" if passed else f"J {J} below the recorded bound"
-            elif status == "optimal":
+            elif status == PlanStatus.OPTIMAL:
                 passed = costs_agree(J, J_star)
                 reason = "" if passed else f"optimum {J} != J* {J_star}"
             else:

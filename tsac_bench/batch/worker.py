@@ -1,7 +1,7 @@
 """One benchmark job, run inside a worker process: the unit both executors share.
 
-A job spec is a JSON-able dict (the instance travels inside it, so cluster workers need no
-shared file system); ``execute_job`` turns it into a JSON-able result dict. Everything that can
+A job spec (``records.JobSpec``, JSON: the instance travels inside it, so cluster workers need
+no shared file system) becomes a result (``records.JobResult``, JSON). Everything that can
 go wrong inside the job (unknown method or mode, an allocator that raises, an invalid plan) is
 caught here and returned as a result with a status, so one bad job never stops a batch. A job
 that hangs or kills its process is handled by the caller, which runs it in a separate process
@@ -27,6 +27,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from tsac_bench.batch.records import JobResult, JobSpec
+
 #: Packages whose versions a result records when the job imported them.
 _VERSIONED_PACKAGES = {
     "numpy": "numpy", "scipy": "scipy", "pyomo": "pyomo", "highspy": "highspy",
@@ -38,7 +40,7 @@ _VERSIONED_PACKAGES = {
 GRACE_SECONDS = 30.0
 
 
-def hard_timeout(spec: dict[str, Any]) -> float | None:
+def hard_timeout(spec: JobSpec) -> float | None:
     """Wall-clock seconds after which the job's process is killed.
 
     A dynamic run plans once at t = 0 and once per distinct release time, each plan under the
@@ -52,11 +54,11 @@ def hard_timeout(spec: dict[str, Any]) -> float | None:
     return plans * float(limit) * 1.5 + float(spec.get("grace", GRACE_SECONDS))
 
 
-def failure(status: str, message: str, detail: str = "") -> dict[str, Any]:
+def failure(status: str, message: str, detail: str = "") -> JobResult:
     """The result of a job that produced no solution."""
-    return {"status": status, "message": message, "detail": detail, "solution": None,
-            "J": None, "terms": None, "runtime": None, "stats": {},
-            "versions": _versions(None), "host": socket.gethostname()}
+    return JobResult(status=status, message=message, detail=detail, solution=None, J=None,
+                     terms=None, runtime=None, stats={}, versions=_versions(None),
+                     host=socket.gethostname())
 
 
 #: The methods (name and settings) this process has run once untimed (``warm_up``).
@@ -81,7 +83,7 @@ def warm_up(method: str, settings: dict[str, Any]) -> None:
         solve(generate(WARM_UP_SCALE, 0), method, settings=settings, budget=WARM_UP_BUDGET)
 
 
-def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
+def execute_job(spec: JobSpec) -> JobResult:
     """Run one (instance, method, mode, seed) job; never raises for a job's own failure. A
     budgeted job's method is warmed up first (``warm_up``)."""
     from tsac_bench.errors import TsacBenchError
@@ -104,12 +106,12 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     except Exception as exc:  # a plug-in may raise anything; the batch must go on
         text = f"{type(exc).__name__}: {exc}"
         return failure("error", text.splitlines()[0], traceback.format_exc())
-    return {"status": "ok", "message": "", "detail": "",
-            "solution": solution_to_dict(solution, instance), "J": evaluation.J,
-            "terms": dict(evaluation.terms), "runtime": outcome.wall_time,
-            "over_budget": outcome.over_budget if budget is not None else None,
-            "stats": jsonable(stats), "versions": _versions(spec["method"]),
-            "host": socket.gethostname()}
+    return JobResult(status="ok", message="", detail="",
+                     solution=solution_to_dict(solution, instance), J=evaluation.J,
+                     terms=dict(evaluation.terms), runtime=outcome.wall_time,
+                     over_budget=outcome.over_budget if budget is not None else None,
+                     stats=jsonable(stats), versions=_versions(spec["method"]),
+                     host=socket.gethostname())
 
 
 def jsonable(value: Any) -> Any:
@@ -151,7 +153,7 @@ def _versions(method: str | None) -> dict[str, str]:
     return versions
 
 
-def run_in_subprocess(spec: dict[str, Any]) -> dict[str, Any]:
+def run_in_subprocess(spec: JobSpec) -> JobResult:
     """Run one job in a fresh Python process, killed at the hard timeout.
 
     Used where the caller may not fork worker processes of its own (a Dask worker is a

@@ -1,4 +1,4 @@
-"""The problem model of MODEL.md: instances and solutions."""
+"""The problem model of docs/model.md: instances and solutions."""
 
 from tsac_bench.model.instance import (
     AAV,

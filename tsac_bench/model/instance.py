@@ -195,7 +195,7 @@ def is_int(value: object) -> bool:
 
 
 def validate_instance(instance: Instance) -> None:
-    """Raise ModelError (with the offending field's path) if the instance breaks MODEL.md."""
+    """Raise ModelError (with the offending field's path) if the instance breaks docs/model.md."""
     if not instance.name:
         raise ModelError("name", "must be a non-empty string")
     if not (math.isfinite(instance.horizon) and instance.horizon > 0):

@@ -248,14 +248,19 @@ def read_solution(path: str | os.PathLike[str], instance: Instance) -> Solution:
     return solution_from_dict(_load_json(path), instance, str(path))
 
 
-def write_solution(solution: Solution, instance: Instance, path: str | os.PathLike[str]) -> None:
-    _write_json(solution_to_dict(solution, instance), path)
+def write_solution(solution: Solution, instance: Instance, path: str | os.PathLike[str], *,
+                   compact: bool = False) -> None:
+    """``compact``: one line, no spaces (the committed best-known plans: half the bytes)."""
+    _write_json(solution_to_dict(solution, instance), path, compact)
 
 
-def _write_json(data: dict[str, Any], path: str | os.PathLike[str]) -> None:
+def _write_json(data: dict[str, Any], path: str | os.PathLike[str],
+                compact: bool = False) -> None:
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     # Write-then-rename so a killed run never leaves a half-written file behind.
     tmp = target.with_suffix(target.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    text = (json.dumps(data, separators=(",", ":")) if compact
+            else json.dumps(data, indent=1))
+    tmp.write_text(text + "\n", encoding="utf-8")
     tmp.replace(target)

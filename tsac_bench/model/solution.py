@@ -3,7 +3,7 @@
 In memory a visit names its node by index (see ``Instance``) so that allocators and the
 evaluator never hash strings on the hot path; ids appear only at the file boundary.
 A depot visit has ``amount == 0``. ``planned_at`` and ``load`` are the dynamic run's stamps
-(MODEL.md, "The dynamic run"): None where absent, as in every offline solution.
+(docs/model.md, "The dynamic run"): None where absent, as in every offline solution.
 """
 
 from __future__ import annotations

@@ -8,10 +8,13 @@ rebuilt from its record) and whose ``plan`` turns a ``PlanningState`` into one r
 from __future__ import annotations
 
 import inspect
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 
+from tsac_bench.errors import TsacBenchError
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.planning.settings import Constraint
 
@@ -37,7 +40,7 @@ class PlanningState:
     """What an allocator may use at one planning moment.
 
     ``visible`` tasks are the released ones the allocator may visit; every AAV's new route
-    must start with its ``committed`` prefix (MODEL.md, the dynamic run), stamps included.
+    must start with its ``committed`` prefix (docs/model.md, "The dynamic run"), stamps included.
     Every visit a plan places after the prefix counts as planned at ``time``: the AAV leaves
     its anchor no earlier (``anchor``), and ``evaluator()`` prices routes so. A depot visit
     the AAV has left carries the goods it loaded, which later deliveries of that trip may not
@@ -150,17 +153,91 @@ class PlanningState:
         return problems
 
 
+class PlanStatus(StrEnum):
+    """What a method proves about its plan (docs/formulations.md). There is no "infeasible":
+    the plan without visits is always feasible, so a model found infeasible is an error."""
+
+    OPTIMAL = "optimal"  # no plan of the planning state costs less (to the solver's tolerance)
+    FEASIBLE = "feasible"  # stopped (by its time limit) before a proof
+    NO_SOLUTION = "no-solution"  # found no plan in time: the routes are its start
+    ERROR = "error"  # the model failed or disagrees with the evaluator: the routes are its start
+
+
+#: The keys under which a record (a results store's stats, a dynamic run's re-plans, a
+#: manifest, an exact solver's report) keeps ``PlanResult.status`` and ``lower_bound``.
+CLAIM_KEYS = ("status", "lower_bound")
+
+
 @dataclass(frozen=True)
 class PlanResult:
-    """An allocator's answer: routes plus what it wants recorded (status, bounds, counters).
+    """An allocator's answer: routes, what it proves about them and what else it wants
+    recorded (counters, solver details).
 
-    ``cost`` is J as the method itself computes it, if it does (a solver's objective, an
-    incremental total); ``solve`` records it next to the evaluator's J and the conformance
-    suite requires the two to agree."""
+    ``status`` and ``lower_bound`` are a method's claims, None where it makes none (every
+    heuristic): ``lower_bound`` is no more than the J of any plan of the planning state. A
+    status may be given as its text (``"optimal"``). ``cost`` is J as the method itself
+    computes it, if it does (a solver's objective, an incremental total); ``solve`` records
+    it next to the evaluator's J and the conformance suite requires the two to agree."""
 
     routes: tuple[Route, ...]
     stats: Mapping[str, Any] = field(default_factory=dict)
     cost: float | None = None
+    status: PlanStatus | None = None
+    lower_bound: float | None = None
+
+    def __post_init__(self) -> None:
+        # Records keep the claims under these keys (recorded_stats): stats holding them
+        # too would make two answers to one question.
+        taken = [key for key in CLAIM_KEYS if key in self.stats]
+        if taken:
+            raise TsacBenchError(f"PlanResult.stats holds {', '.join(taken)}: pass "
+                                 "PlanResult(..., status=, lower_bound=) instead")
+        if self.status is not None:
+            try:
+                object.__setattr__(self, "status", PlanStatus(self.status))
+            except ValueError:
+                raise TsacBenchError(f"PlanResult.status {self.status!r}: expected one of "
+                                     f"{', '.join(PlanStatus)}") from None
+        if self.lower_bound is not None:
+            bound = float(self.lower_bound)
+            if not math.isfinite(bound):
+                raise TsacBenchError(f"PlanResult.lower_bound {bound}: expected a finite "
+                                     "number, or None for no bound")
+            object.__setattr__(self, "lower_bound", bound)
+
+    @classmethod
+    def from_solver(cls, routes: Sequence[Route], report: Mapping[str, Any]) -> PlanResult:
+        """A PlanResult from a solver's report, whose ``status`` and ``lower_bound`` are
+        among its stats (as formulations/ report them)."""
+        return cls(tuple(routes), {k: v for k, v in report.items() if k not in CLAIM_KEYS},
+                   status=report.get("status"), lower_bound=report.get("lower_bound"))
+
+    def recorded_stats(self) -> dict[str, Any]:
+        """``stats`` as records keep them, with the claims (``claim_entries``)."""
+        return {**self.stats, **claim_entries(self.status, self.lower_bound)}
+
+
+def claim_entries(status: PlanStatus | None, lower_bound: float | None) -> dict[str, Any]:
+    """The claims made, under ``CLAIM_KEYS``, as records keep them (``recorded_claim`` reads
+    them back)."""
+    claims = zip(CLAIM_KEYS, (status, lower_bound), strict=True)
+    return {key: value for key, value in claims if value is not None}
+
+
+def recorded_claim(stats: Any) -> tuple[PlanStatus | None, float | None]:
+    """The status and lower bound a record keeps (``PlanResult.recorded_stats``); None for
+    either where it has none, or an older plug-in's stats hold something else there."""
+    if not isinstance(stats, Mapping):
+        return None, None
+    status, bound = (stats.get(key) for key in CLAIM_KEYS)
+    known = status in tuple(PlanStatus)
+    is_number = isinstance(bound, int | float) and not isinstance(bound, bool)
+    return (PlanStatus(status) if known else None), (float(bound) if is_number else None)
+
+
+def mip_gap(J: float, lower_bound: float) -> float:
+    """How far a bound leaves J from proven: (J - LB) / J, as MIP solvers state it."""
+    return max(0.0, J - lower_bound) / max(abs(J), 1e-10)
 
 
 #: The planning modes. "static": every task known at t = 0, one plan call. "dynamic": the
@@ -173,7 +250,7 @@ class Allocator(Protocol):
     """``name`` is what users type. An allocator may also declare ``modes`` (a tuple of
     "static", "dynamic"; both when absent): the planning states it can handle. "static"
     states have nothing committed; "dynamic" ones have committed prefixes and hidden tasks.
-    A method that returns ``stats["status"] == "optimal"`` only for proven optima declares
+    A method that returns ``status=PlanStatus.OPTIMAL`` only for proven optima declares
     ``proves_optimality = True``: its static runs may then supply J* to reports and
     ``tsac-bench verify`` uses it as a backend."""
 

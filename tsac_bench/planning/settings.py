@@ -79,6 +79,11 @@ class Constraint(ABC):
     def describe(self, context: Mapping[str, Any]) -> str:
         """What is allowed, e.g. "an integer >= 1"."""
 
+    def describe_default(self, value: Any) -> str:
+        """The default as ``tsac-bench methods`` shows it: the text that converts back to it,
+        unless a constraint knows a clearer name (a default that stands for something)."""
+        return format_value(value)
+
 
 Bound = float | int | str | None
 _BRACKETS = {"both": "[]", "left": "[)", "right": "(]", "neither": "()"}
@@ -253,9 +258,18 @@ def settings_table(cls: Callable[..., Any]) -> list[tuple[str, str, str]]:
     checked by the method alone ("")."""
     names, defaults, _ = constructor_keywords(cls)
     constraints: Mapping[str, Constraint] = getattr(cls, "setting_constraints", {})
-    return [(name, format_value(defaults[name]) if name in defaults else "(required)",
+    return [(name, _default_text(defaults, constraints, name),
              constraints[name].describe(defaults) if name in constraints else "")
             for name in names]
+
+
+def _default_text(defaults: Mapping[str, Any], constraints: Mapping[str, Constraint],
+                  name: str) -> str:
+    if name not in defaults:
+        return "(required)"
+    if name in constraints:
+        return constraints[name].describe_default(defaults[name])
+    return format_value(defaults[name])
 
 
 # --- method specs ------------------------------------------------------------------------

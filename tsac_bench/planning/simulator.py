@@ -1,4 +1,4 @@
-"""The dynamic run of MODEL.md: plan at t = 0, re-plan at every release time with the
+"""The dynamic run of docs/model.md: plan at t = 0, re-plan at every release time with the
 committed prefixes fixed, evaluate the executed routes from scratch.
 
 Rules (docs/model.md, "The dynamic run"):
@@ -8,7 +8,7 @@ Rules (docs/model.md, "The dynamic run"):
   plan in force whose previous node it has left by t_e (dep_k <= t_e; the start position
   counts as left at time 0). The allocator then plans again and may change anything after the
   prefixes, never the prefixes.
-* Physics is written into the routes (MODEL.md): every visit a plan at t_e > 0 places after
+* Physics is written into the routes (docs/model.md): every visit a plan at t_e > 0 places after
   the prefixes gets ``planned_at = t_e`` (the AAV leaves no earlier; an idle AAV leaves at
   t_e, not at its last arrival), and a depot visit the AAV has left by t_e gets ``load`` =
   the delivery goods the plan in force had it carry (a later plan may not deliver more from
@@ -124,7 +124,7 @@ def finished_tasks(instance: Instance, traces: Sequence[RouteTrace],
 class Replan:
     """One planning moment of a run: what was known, what was fixed, what the plan costs.
 
-    ``J`` is the plan's cost over every task of the instance (MODEL.md); ``J_known`` over the
+    ``J`` is the plan's cost over every task of the instance (docs/model.md); ``J_known`` over the
     tasks released by ``time`` and ``J_known_before`` the same for the plan in force just
     before (the new tasks still unserved): the jump and drop of the paper's Fig. 5 curve."""
 
@@ -206,7 +206,7 @@ def simulate(instance: Instance, allocator: Allocator, *, seed: int = 0,
             J_known_before=before,
             wall_time=plan.wall_time,
             claimed_cost=plan.result.cost,
-            stats=dict(plan.result.stats),
+            stats=plan.result.recorded_stats(),
         ))
     assert plan is not None
     final = evaluator.evaluate(plan.routes)

@@ -11,7 +11,15 @@ from typing import Any
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.model import Instance, Solution
 from tsac_bench.model.evaluator import Evaluation, costs_agree
-from tsac_bench.planning.allocator import ALL_MODES, Allocator, PlanningState, supported_modes
+from tsac_bench.planning.allocator import (
+    ALL_MODES,
+    Allocator,
+    PlanningState,
+    PlanStatus,
+    claim_entries,
+    mip_gap,
+    supported_modes,
+)
 from tsac_bench.planning.budget import budgeted_settings, check_budget, is_over_budget
 from tsac_bench.planning.registry import allocator_class, make_allocator
 from tsac_bench.planning.settings import MethodSpec, parse_method_spec
@@ -22,11 +30,13 @@ __all__ = ["InvalidPlan", "SolveOutcome", "recorded_settings", "solve"]
 
 @dataclass(frozen=True)
 class SolveOutcome:
-    """``stats``: the allocator's own stats (static), or ``{"replans": [...]}`` with one
-    record per planning moment (dynamic, see ``simulator.Replan``). ``claimed_cost`` is the
-    J the method computed itself (``PlanResult.cost``), of the last plan, if any.
-    ``budget`` is the seconds each plan call had (None: the method's own stopping rule) and
-    ``plan_seconds`` what each plan call took."""
+    """``stats``: the plan's recorded stats (static, ``PlanResult.recorded_stats``), or
+    ``{"replans": [...]}`` with one record per planning moment (dynamic, see
+    ``simulator.Replan``). ``claimed_cost`` is the J the method computed itself
+    (``PlanResult.cost``), of the last plan, if any. ``budget`` is the seconds each plan call
+    had (None: the method's own stopping rule) and ``plan_seconds`` what each plan call took.
+    ``status`` and ``lower_bound``: the plan's claims (``PlanResult``), static runs only: a
+    re-plan's bound holds for plans that keep its committed prefixes, not for the run."""
 
     solution: Solution
     evaluation: Evaluation
@@ -35,6 +45,8 @@ class SolveOutcome:
     claimed_cost: float | None = None
     budget: float | None = None
     plan_seconds: tuple[float, ...] = ()
+    status: PlanStatus | None = None
+    lower_bound: float | None = None
 
     @property
     def over_budget(self) -> int:
@@ -46,6 +58,11 @@ class SolveOutcome:
     def cost(self) -> float:
         assert self.evaluation.J is not None
         return self.evaluation.J
+
+    @property
+    def gap(self) -> float | None:
+        """``mip_gap`` of J and the lower bound; None without a bound."""
+        return None if self.lower_bound is None else mip_gap(self.cost, self.lower_bound)
 
     @property
     def claim_matches(self) -> bool:
@@ -91,8 +108,9 @@ def solve(instance: Instance, method: str | MethodSpec | Allocator, *, seed: int
         plan = checked_plan(allocator, PlanningState.static(instance), seed=seed,
                             time_limit=time_limit)
         routes, evaluation, wall = plan.routes, plan.evaluation, plan.wall_time
-        stats, claimed = dict(plan.result.stats), plan.result.cost
+        stats, claimed = plan.result.recorded_stats(), plan.result.cost
         plan_seconds = (plan.wall_time,)
+        status, bound = plan.result.status, plan.result.lower_bound
     else:
         run = simulate(instance, allocator, seed=seed, time_limit=time_limit)
         routes, evaluation, wall = run.routes, run.evaluation, run.wall_time
@@ -100,12 +118,15 @@ def solve(instance: Instance, method: str | MethodSpec | Allocator, *, seed: int
         # Only the last plan is the executed one; earlier claims priced other plans.
         claimed = run.replans[-1].claimed_cost
         plan_seconds = tuple(r.wall_time for r in run.replans)
+        status = bound = None
     meta = {"method": allocator.name, "mode": mode, "seed": seed,
             "settings": recorded_settings(allocator)}
     if budget is not None:
         meta["budget"] = budget
+    meta.update(claim_entries(status, bound))  # the solution file keeps them as a store does
     solution = Solution(instance.name, routes, evaluation.J, meta)
-    return SolveOutcome(solution, evaluation, wall, stats, claimed, budget, plan_seconds)
+    return SolveOutcome(solution, evaluation, wall, stats, claimed, budget, plan_seconds,
+                        status, bound)
 
 
 def recorded_settings(allocator: Allocator) -> dict[str, Any]:

@@ -7,10 +7,12 @@ How the numbers are made (docs/reports.md says the same for readers of a report)
 * Per instance, J is first averaged over seeds; the statistics of a (mode, scale, method) cell
   are then taken over its instances.
 * J* of an instance is the manifest's ``J_star``; failing that, the smallest J of a static run
-  of a method that proves optimality whose stats say ``status: optimal``. The lower bound is
-  the largest of the manifest's ``lower_bound`` and those runs' ``lower_bound``.
-  gap = (J - J*) / J*; where only a lower bound is known, ``gap_lb`` = (J - LB) / LB, an upper
-  bound on the true gap.
+  of a method that proves optimality whose plan's status is optimal (``PlanResult.status``,
+  in the stored stats). The lower bound is the largest of the manifest's ``lower_bound`` and
+  those runs' lower bounds.
+  gap = (J - J*) / J*; where J* is unknown, ``gap_best`` = (J - B) / B with B the best J known
+  (the manifest's ``best_J`` or the run's lowest J of the instance, whichever is lower) and
+  ``gap_lb`` = (J - LB) / LB: the true gap lies between them.
 
 Method labels are whatever the store's ``method`` column holds (a registered name or a method
 spec such as ``hocf:init=incumbent``); nothing here takes them apart. A job with a budget per
@@ -30,7 +32,7 @@ import pandas as pd
 
 from tsac_bench.batch.store import OK, ResultStore
 from tsac_bench.model.evaluator import cost_at_least
-from tsac_bench.planning import ALL_MODES, is_exact_method
+from tsac_bench.planning import ALL_MODES, PlanStatus, is_exact_method, recorded_claim
 
 
 def load(run_dir: str | Path) -> pd.DataFrame:
@@ -92,20 +94,25 @@ def references(frame: pd.DataFrame) -> pd.DataFrame:
     """Per instance: J_star, lower_bound and where J* came from (see the module notes)."""
     instances = frame["instance"].drop_duplicates().sort_values()
     refs = pd.DataFrame(index=pd.Index(instances, name="instance"))
-    manifest = frame.groupby("instance")[["J_star", "lower_bound"]].max()
+    columns = [c for c in ("J_star", "lower_bound", "best_J") if c in frame]
+    manifest = frame.groupby("instance")[columns].max().reindex(columns=["J_star",
+                                                                       "lower_bound", "best_J"])
     refs["J_star"] = manifest["J_star"]
     refs["lower_bound"] = manifest["lower_bound"]
+    # Every ok job's plan is feasible offline with no higher J (docs/model.md, "The dynamic
+    # run"), so the run's own lowest J of an instance, in any mode, is a best known J too.
+    run_best = frame[frame["status"] == OK].groupby("instance")["J"].min()
+    refs["best_J"] = pd.concat([manifest["best_J"], run_best], axis=1).min(axis=1)
     refs["J_star_source"] = np.where(refs["J_star"].notna(), "manifest", None)
     exact = frame[frame["method"].map(is_exact_method).astype(bool) & (frame["mode"] == "static")
                   & (frame["status"] == OK)]
     for instance, rows in exact.groupby("instance"):
-        stats = rows["stats"].map(lambda s: s if isinstance(s, dict) else {})
-        optimal = rows[stats.map(lambda s: s.get("status") == "optimal")]
+        claims = [recorded_claim(stats) for stats in rows["stats"]]
+        optimal = rows[[status == PlanStatus.OPTIMAL for status, _ in claims]]
         if pd.isna(refs.at[instance, "J_star"]) and not optimal.empty:
             refs.at[instance, "J_star"] = optimal["J"].min()
             refs.at[instance, "J_star_source"] = "exact run"
-        bounds = [float(s["lower_bound"]) for s in stats
-                  if isinstance(s.get("lower_bound"), int | float)]
+        bounds = [bound for _, bound in claims if bound is not None]
         if bounds:
             refs.at[instance, "lower_bound"] = np.nanmax([refs.at[instance, "lower_bound"],
                                                           *bounds])
@@ -131,13 +138,16 @@ def per_instance(frame: pd.DataFrame) -> pd.DataFrame:
     bound = table["lower_bound"].where(table["lower_bound"] > 0)
     table["gap"] = (table["J"] - j_star) / j_star
     table["gap_lb"] = ((table["J"] - bound) / bound).where(j_star.isna())
+    best = table["best_J"].where(table["best_J"] > 0)
+    table["gap_best"] = ((table["J"] - best) / best).where(j_star.isna())
     return table
 
 
 def below_reference(frame: pd.DataFrame) -> pd.DataFrame:
-    """Jobs whose J is below their instance's J* or lower bound. MODEL.md: every executed
-    plan is a feasible offline solution, so J >= J* >= LB always; a row here is a bug in an
-    exact model, the evaluator or the simulator (or a wrong manifest)."""
+    """Jobs whose J is below their instance's J* or lower bound. Every executed plan is a
+    feasible offline solution (docs/model.md, "The dynamic run"), so J >= J* >= LB always; a
+    row here is a bug in an exact model, the evaluator or the simulator (or a wrong
+    manifest)."""
     ok = frame[frame["status"] == OK].drop(columns=["J_star", "lower_bound"])
     ok = ok.merge(references(frame), left_on="instance", right_index=True, how="left")
     floor = ok[["J_star", "lower_bound"]].max(axis=1)
@@ -206,11 +216,10 @@ def coalition_sizes(frame: pd.DataFrame, run_dir: Path) -> pd.DataFrame:
 
 
 def replan_records(stats: Any) -> list[Any]:
-    """The simulator's per-re-plan records in a job's stats (``replans``; ``events`` in
-    early stores)."""
+    """The simulator's per-re-plan records in a job's stats (``replans``)."""
     if not isinstance(stats, dict):
         return []
-    return list(stats.get("replans") or stats.get("events") or [])
+    return list(stats.get("replans") or [])
 
 
 def replan_costs(stats: Any, instance: Any) -> tuple[list[float], list[float]]:

@@ -111,8 +111,9 @@ def _tables_section(table: pd.DataFrame, mode: str, tables_dir: Path) -> list[st
         lines += ["No instance of this run has a known J* (no manifest entry, no proven "
                   "optimum of an exact method): no gaps to J*.", ""]
     elif (rows["gap_n"] < rows["instances"]).any():
-        lines += ["Where only a lower bound is known, `tables/per_instance.csv` has `gap_lb` "
-                  "and `tables/summary.csv` the `gap_lb_*` measures.", ""]
+        lines += ["Where J* is unknown, `tables/per_instance.csv` has `gap_best` (to the best "
+                  "J known) and `gap_lb` (to the lower bound), which bracket the gap, and "
+                  "`tables/summary.csv` their `gap_best_*` and `gap_lb_*` measures.", ""]
     return lines
 
 

@@ -24,7 +24,7 @@ from tsac_bench.reporting.data import per_instance
 #: Two costs closer than this (relative) tie for a win.
 TIE_TOLERANCE = 1e-9
 #: Shift of the shifted geometric mean, in units of J: with the default weights (100, 10, 1)
-#: one unit is the operating cost of one AAV flying its whole range (MODEL.md, E_base), small
+#: one unit is the operating cost of one AAV flying its whole range (docs/model.md, E_base), small
 #: against a late (10) or an unserved task (110), so gaps of a fraction of a flight weigh
 #: little.
 SGM_SHIFT = 1.0

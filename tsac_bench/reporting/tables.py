@@ -85,13 +85,15 @@ GAP_NOTE_LATEX = (
 PIVOT_NOTE_MARKDOWN = (
     "Each cell: mean J over the instances (each J the mean over seeds), and in parentheses "
     "the gap of sums (ΣJ - ΣJ*) / ΣJ* in % over the instances with a proven optimum J*; "
-    "`≤`: no J* known, the gap to the lower bound LB, (ΣJ - ΣLB) / ΣLB, an upper bound on "
-    "the gap; `part`: over only part of the cell's instances; `n=k`: mean over k instances, "
-    "fewer than the scale's other methods (never bold). Bold: the lowest mean J of a scale.")
+    "`[a, b]`: no J* known, the gap lies between a, the gap to the best J known B, "
+    "(ΣJ - ΣB) / ΣB, and b, the gap to the lower bound LB, (ΣJ - ΣLB) / ΣLB; `part`: over "
+    "only part of the cell's instances; `n=k`: mean over k instances, fewer than the "
+    "scale's other methods (never bold). Bold: the lowest mean J of a scale.")
 PIVOT_NOTE_LATEX = (
     r"Mean $J$ over the instances (each $J$ the mean over seeds) and, in parentheses, the "
     r"gap of sums $(\sum J - \sum J^*)/\sum J^*$ (\%) over those with a proven optimum "
-    r"$J^*$; $\leq$: to the lower bound in place of $J^*$, an upper bound on the gap. $^a$: "
+    r"$J^*$; $[a, b]$: no $J^*$ known, the gap lies between $a$, the gap to the best $J$ "
+    r"known, and $b$, the gap to the lower bound. $^a$: "
     r"over fewer instances than the scale's other methods; $^b$: over part of the cell's "
     r"instances. Bold: the lowest mean $J$ of a scale.")
 
@@ -100,7 +102,8 @@ def method_table(frame: pd.DataFrame) -> pd.DataFrame:
     """Per (mode, scale, method; a method at a budget is a method of its own,
     ``data.method_label``): jobs, failed jobs, instances with a result, mean/std/median J over
     instances; the gap measures to J* (``gap_*``, over the instances with a known J*)
-    and to the lower bound where J* is unknown (``gap_lb_*``)."""
+    and where J* is unknown to the best J known (``gap_best_*``) and to the lower bound
+    (``gap_lb_*``), which bracket the true gap."""
     table = per_instance(frame)
     keys = ["mode", "scale", "method"]
     rows = []
@@ -108,19 +111,22 @@ def method_table(frame: pd.DataFrame) -> pd.DataFrame:
         no_j_star = group["J_star"].isna()
         to_j_star = gap_measures(group["J"], group["J_star"])
         to_bound = gap_measures(group["J"], group["lower_bound"].where(no_j_star))
+        to_best = gap_measures(group["J"], group["best_J"].where(no_j_star))
         rows.append({
             **dict(zip(keys, key, strict=True)), "instances": len(group),
             "J_mean": group["J"].mean(), "J_std": group["J"].std(),
             "J_median": group["J"].median(),
             **{f"gap_{name}": value for name, value in to_j_star.items()},
-            **{f"gap_lb_{name}": value for name, value in to_bound.items()}})
+            **{f"gap_lb_{name}": value for name, value in to_bound.items()},
+            **{f"gap_best_{name}": value for name, value in to_best.items()}})
     stats = pd.DataFrame(rows, columns=[
         *keys, "instances", "J_mean", "J_std", "J_median", "gap_mean", "gap_sum", "gap_sgm",
-        "gap_n", "gap_lb_mean", "gap_lb_sum", "gap_lb_sgm", "gap_lb_n"]).set_index(keys)
+        "gap_n", "gap_lb_mean", "gap_lb_sum", "gap_lb_sgm", "gap_lb_n", "gap_best_mean",
+        "gap_best_sum", "gap_best_sgm", "gap_best_n"]).set_index(keys)
     counts = by_series(frame).groupby(keys).agg(jobs=("status", "size"),
                                      failed=("status", lambda s: int((s != OK).sum())))
     stats = counts.join(stats, how="left").reset_index()
-    for column in ("instances", "gap_n", "gap_lb_n"):
+    for column in ("instances", "gap_n", "gap_lb_n", "gap_best_n"):
         stats[column] = stats[column].fillna(0).astype(int)
     order = {s: i for i, s in enumerate(scale_order(stats["scale"]))}
     modes = {m: i for i, m in enumerate(ordered_modes(stats["mode"]))}
@@ -236,7 +242,8 @@ class PivotCell:
 
     mean: float
     gap: float  # gap of sums to J*, else to the lower bound; NaN when neither is known
-    to_bound: bool  # the gap is to the lower bound: an upper bound on the gap to J*
+    to_bound: bool  # no J*: the gap is to the lower bound, an upper bound on the gap to J*
+    gap_best: float  # where to_bound, the gap of sums to the best J known: a lower bound
     partial: bool  # the gap covers only part of the cell's instances
     fewer: bool  # the mean covers fewer instances than the scale's best-covered method
     instances: int
@@ -261,7 +268,9 @@ def pivot_cells(table: pd.DataFrame, mode: str) -> tuple[list[str], list[str],
             n_gap = row["gap_lb_n"] if to_bound else row["gap_n"]
             cells[(row["method"], scale)] = PivotCell(
                 mean=row["J_mean"], gap=row["gap_lb_sum"] if to_bound else row["gap_sum"],
-                to_bound=bool(to_bound and n_gap > 0), partial=0 < n_gap < row["instances"],
+                to_bound=bool(to_bound and n_gap > 0),
+                gap_best=row["gap_best_sum"] if to_bound else math.nan,
+                partial=0 < n_gap < row["instances"],
                 fewer=row["instances"] < most, instances=int(row["instances"]),
                 best=bool(best.get(row.name, False)))
     return methods, scales, cells
@@ -331,8 +340,9 @@ def _latex_mean(cell: PivotCell | None) -> str:
 def _latex_gap(cell: PivotCell | None) -> str:
     if cell is None or math.isnan(cell.gap):
         return ""
-    bound = r"$\leq$" if cell.to_bound else ""
-    return f"({bound}{_fmt(cell.gap, 1, percent=True)})" + (MARK_PARTIAL if cell.partial else "")
+    gap = _fmt(cell.gap, 1, percent=True)
+    text = f"[{_fmt(cell.gap_best, 1, percent=True)}, {gap}]" if cell.to_bound else f"({gap})"
+    return text + (MARK_PARTIAL if cell.partial else "")
 
 
 def markdown_pivot(table: pd.DataFrame, mode: str) -> str:
@@ -353,8 +363,10 @@ def _markdown_cell(cell: PivotCell | None) -> str:
     if cell.fewer:
         text += f" n={cell.instances}"
     if not math.isnan(cell.gap):
-        text += f" ({'≤ ' if cell.to_bound else ''}{_fmt(cell.gap, 1, percent=True)}"
-        text += ", part)" if cell.partial else ")"
+        gap = _fmt(cell.gap, 1, percent=True)
+        part = ", part" if cell.partial else ""
+        text += (f" [{_fmt(cell.gap_best, 1, percent=True)}, {gap}{part}]" if cell.to_bound
+                 else f" ({gap}{part})")
     return text
 
 

@@ -1,0 +1,139 @@
+"""Best-known plans and bounds kept in a set's manifest (tsac_bench/batch/best_known.py)."""
+
+import json
+import shutil
+
+import pytest
+
+from tsac_bench.batch import best_known
+from tsac_bench.batch.manifests import iter_instance_files, read_manifest
+from tsac_bench.batch.runner import RunConfig, run_batch
+from tsac_bench.errors import InputError
+from tsac_bench.formulations.task_bound import task_lower_bound
+from tsac_bench.model import Solution
+from tsac_bench.model.evaluator import evaluate
+from tsac_bench.model.io import read_instance, read_solution
+from tsac_bench.planning import PlanningState
+
+from .conftest import QUICK
+
+SMALL = ["quick-2-4-s1", "quick-2-5-s2", "quick-4-10-s5"]
+
+
+@pytest.fixture
+def small_set(tmp_path):
+    """Three quick instances (two proved, one not) and their manifest, without budgets."""
+    directory = tmp_path / "set"
+    directory.mkdir()
+    manifest = json.loads((QUICK / "manifest.json").read_text())
+    # As `prove` writes them: J* and the best J of the exact backends, no plan kept.
+    manifest["instances"] = {k: {f: v[f] for f in ("file", "J_star", "lower_bound", "status",
+                                                   "best_J")}
+                             for k, v in manifest["instances"].items() if k in SMALL}
+    del manifest["budgets"]  # one job per method and mode is enough here
+    # The unproved instance starts with no best J (prove recorded CP-SAT's, without a plan).
+    del manifest["instances"]["quick-4-10-s5"]["best_J"]
+    (directory / "manifest.json").write_text(json.dumps(manifest))
+    for name in SMALL:
+        shutil.copy(QUICK / f"{name}.json", directory)
+    return directory
+
+
+def test_a_run_brings_its_best_offline_plan_and_bounds_into_the_manifest(small_set, tmp_path):
+    run = tmp_path / "run"
+    run_batch(RunConfig([small_set], run, methods=["greedy", "hocf"], mode="both", jobs=1),
+              progress=False)
+    run_batch(RunConfig([small_set / "quick-2-4-s1.json", small_set / "quick-2-5-s2.json"],
+                        run, methods=["exact"], mode="static", jobs=1), progress=False)
+    before = read_manifest(small_set).entries
+    changes = best_known.update(run, [small_set], note=lambda line: None)
+
+    entries = read_manifest(small_set).entries
+    for name in ("quick-2-4-s1", "quick-2-5-s2"):
+        # Proved before, without a plan: the first job's plan that reaches J* is stored.
+        entry = entries[name]
+        assert entry["J_star"] == before[name]["J_star"] and entry["status"] == "optimal"
+        assert entry["best_J"] == pytest.approx(before[name]["J_star"], rel=1e-9)
+        assert entry["found_by"]["method"] in {"greedy", "hocf", "exact"}
+    # The unproved 4/10 instance: the lowest J of greedy and hocf in either mode, each
+    # dynamic plan counted with its stamps removed.
+    instance = read_instance(small_set / "quick-4-10-s5.json")
+    costs = {}
+    for path in (run / "solutions").rglob("quick-4-10-s5/*.json"):
+        plan = best_known.offline_plan(read_solution(path, instance))
+        costs[path.name] = evaluate(instance, plan).J
+    entry = entries["quick-4-10-s5"]
+    assert len(costs) == 4 and entry["best_J"] == pytest.approx(min(costs.values()), rel=1e-12)
+    assert entry["lower_bound"] == before["quick-4-10-s5"]["lower_bound"]
+    assert entry["status"] == "feasible" and entry["J_star"] is None
+    assert {c.instance for c in changes if c.what == "plan"} == set(SMALL)
+    assert all(check.passed for check in best_known.check(small_set))
+    # The plans beside the instances are not instances to a later run.
+    assert [p.name for p in iter_instance_files([small_set])] == [f"{n}.json" for n in SMALL]
+    # Taking the same run again changes nothing.
+    assert best_known.update(run, [small_set], note=lambda line: None) == []
+
+
+def test_check_finds_a_best_J_that_its_plan_does_not_evaluate_to(small_set, tmp_path):
+    run = tmp_path / "run"
+    run_batch(RunConfig([small_set / "quick-4-10-s5.json"], run, methods=["greedy"],
+                        mode="static", jobs=1), progress=False)
+    best_known.update(run, [small_set], note=lambda line: None)
+    path = small_set / "manifest.json"
+    data = json.loads(path.read_text())
+    data["instances"]["quick-4-10-s5"]["best_J"] -= 0.01
+    path.write_text(json.dumps(data))
+    (failed,) = [c for c in best_known.check(small_set) if not c.passed]
+    assert failed.instance == "quick-4-10-s5" and "best_J says" in failed.problem
+
+
+def test_a_bound_above_the_best_J_and_a_plan_below_J_star_are_refused():
+    entry = {"best_J": 10.0, "lower_bound": 2.0, "J_star": None, "status": "feasible"}
+    with pytest.raises(InputError, match=r"above the best-known J 10\.0"):
+        best_known.take_bound(entry, 10.5, {"method": "exact"}, "run job x")
+    assert best_known.take_bound(entry, 10.0, {"method": "exact", "time_limit": 60}, "x")
+    assert entry["status"] == "optimal" and entry["J_star"] == 10.0
+    assert not best_known.take_bound(entry, 9.0, {"method": "exact-bp"}, "x")
+
+
+def test_task_bounds_fill_an_empty_set(small_set):
+    (small_set / "manifest.json").unlink()
+    assert best_known.add_task_bounds(small_set) == 3
+    entries = read_manifest(small_set).require_valid().entries
+    for name in SMALL:
+        state = PlanningState.static(read_instance(small_set / f"{name}.json"))
+        assert entries[name]["lower_bound"] == task_lower_bound(state)
+        assert entries[name]["bound_by"] == {"method": "tasks-on-their-own"}
+    assert best_known.add_task_bounds(small_set) == 0
+
+
+def test_a_plan_below_a_proved_J_star_is_refused(tmp_path):
+    instance = read_instance(QUICK / "quick-2-4-s1.json")
+    entry = {"J_star": 1e9, "best_J": 1e9, "lower_bound": 1e9, "status": "optimal"}
+    with pytest.raises(InputError, match=r"below the proved J\* 1000000000\.0"):
+        best_known.take_plan(entry, tmp_path, instance, Solution.empty(instance),
+                             {"method": "greedy"}, "run job y")
+    assert not (tmp_path / "best-known").exists()
+
+
+def test_the_command_line_updates_shows_and_verifies_the_plans(small_set, tmp_path):
+    from typer.testing import CliRunner
+
+    from tsac_bench.cli import app
+
+    def invoke(*args):
+        return CliRunner().invoke(app, [str(a) for a in args])
+
+    run = tmp_path / "run"
+    run_batch(RunConfig([small_set / "quick-4-10-s5.json"], run, methods=["greedy"],
+                        mode="static", jobs=1), progress=False)
+    updated = invoke("bks", "update", run, "--set", small_set)
+    assert updated.exit_code == 0 and "quick-4-10-s5: plan none -> " in updated.output
+    shown = invoke("bks", "show", small_set)
+    assert shown.exit_code == 0 and "greedy" in shown.output
+    checked = invoke("verify", small_set, "--plans-only")
+    assert checked.exit_code == 0 and "1/1 best-known plans passed" in checked.output
+    (small_set / "best-known" / "quick-4-10-s5.json").write_text("{}")
+    assert invoke("verify", small_set, "--plans-only").exit_code == 1
+    missing = invoke("bks", "update", tmp_path / "nowhere")
+    assert missing.exit_code == 2 and len(missing.output.strip().splitlines()) == 1

@@ -1,0 +1,263 @@
+"""Best-known solutions and bounds of an instance set, kept beside the instances as CVRPLIB
+keeps its ``.sol`` files: the gap of any method is then measured against a plan anyone can
+re-evaluate and a bound whose source is named.
+
+They live in the set's manifest (``manifest.json``, the one owner of what is known of an
+instance's optimum), each entry gaining
+
+- ``best_J``: the lowest J of any plan the project found, as an offline plan (a dynamic
+  run's stamps removed: docs/model.md, "The dynamic run", such a plan is feasible offline and
+  its J no higher);
+- ``best_plan``: that plan, a solution file relative to the set's directory
+  (``best-known/NAME.json``);
+- ``found_by``: the method, settings, mode, seed and budget of the job that found it;
+- ``bound_by``: what proved ``lower_bound`` (an exact method and its time limit, or
+  ``tasks-on-their-own``, the bound that needs no search: formulations/task_bound.py).
+
+``J_star`` is set (``status`` "optimal") once the bound reaches the best J. ``update`` takes a
+run's better plans and bounds in; ``check`` re-evaluates every stored plan.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tsac_bench.batch.manifests import (
+    PLAN_FOLDER,
+    Manifest,
+    iter_instance_files,
+    read_manifest,
+    write_manifest,
+)
+from tsac_bench.batch.store import OK, ResultStore
+from tsac_bench.errors import InputError
+from tsac_bench.model import Instance, Solution, Visit
+from tsac_bench.model.evaluator import cost_at_least, costs_agree, evaluate
+from tsac_bench.model.io import read_instance, read_solution, write_solution
+
+TASK_BOUND = "tasks-on-their-own"
+
+
+def offline_plan(solution: Solution) -> Solution:
+    """``solution`` with the dynamic run's stamps removed: an offline plan of no higher J."""
+    return Solution(solution.instance,
+                    tuple(tuple(Visit(v.node, v.amount) for v in route)
+                          for route in solution.routes))
+
+
+@dataclass(frozen=True)
+class Change:
+    """One improvement a run brought to a set: a lower J or a higher bound."""
+
+    instance: str
+    what: str  # "plan" or "bound"
+    before: float | None
+    after: float
+    by: str
+
+
+class _Set:
+    """One directory of instances and its manifest, read once, written once."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        manifest = read_manifest(directory)
+        if manifest.problems and manifest.path.exists():
+            manifest.require_valid()
+        # An absent manifest starts empty; the entries made here give it its first content.
+        self.manifest = Manifest(manifest.path, manifest.entries, [], manifest.budgets)
+        self.instances = {read_instance(f).name: f for f in iter_instance_files([directory])
+                          if f.parent == directory}
+        self.changed = False
+
+    def entry(self, name: str) -> dict[str, Any]:
+        entry = self.manifest.entries.get(name)
+        if entry is None:
+            entry = {"file": self.instances[name].name, "J_star": None, "lower_bound": None,
+                     "status": "feasible"}
+            self.manifest.entries[name] = entry
+        return entry
+
+
+def _job_label(row: dict[str, Any], run_dir: Path) -> dict[str, Any]:
+    return {**{key: row.get(key) for key in ("method", "settings", "mode", "seed", "budget")},
+            "run": run_dir.name}
+
+
+def _describe(found_by: dict[str, Any]) -> str:
+    budget = found_by.get("budget")
+    return (f"{found_by['method']} {found_by.get('mode', '')}".strip()
+            + ("" if budget is None else f" @ {budget:g} s"))
+
+
+def take_plan(entry: dict[str, Any], directory: Path, instance: Instance, solution: Solution,
+              found_by: dict[str, Any], where: str) -> bool:
+    """Store ``solution`` (offline) as the entry's best plan if its J is lower than the best
+    known, or equal to it where no plan is stored yet (a manifest proved before plans were
+    kept); returns whether it did. A plan below a proved J* refutes the proof: refused,
+    loudly."""
+    plan = offline_plan(solution)
+    cost = evaluate(instance, plan).J
+    best, J_star = entry.get("best_J"), entry.get("J_star")
+    if J_star is not None and not cost_at_least(cost, J_star):
+        raise InputError(where, "J", f"{cost!r} from {_describe(found_by)} is below the proved "
+                         f"J* {J_star!r}: the proof or the plan is wrong")
+    if best is not None and (cost_at_least(cost, best) if entry.get("best_plan")
+                             else not costs_agree(cost, best) and cost > best):
+        return False
+    relative = f"{PLAN_FOLDER}/{instance.name}.json"
+    write_solution(plan.with_cost(cost).with_meta(found_by=found_by), instance,
+                   directory / relative, compact=True)
+    entry.update(best_J=cost, best_plan=relative, found_by=found_by)
+    _settle(entry)
+    return True
+
+
+def take_bound(entry: dict[str, Any], bound: float, bound_by: dict[str, Any],
+               where: str) -> bool:
+    """Raise the entry's lower bound to ``bound`` if higher; returns whether it did. A bound
+    above the best plan's J is a defect of whatever produced it: refused, loudly."""
+    best = entry.get("best_J")
+    if best is not None and not cost_at_least(best, bound):
+        raise InputError(where, "lower_bound", f"{bound!r} from {_describe(bound_by)} is above "
+                         f"the best-known J {best!r}: a bound that is not a bound")
+    current = entry.get("lower_bound")
+    if current is not None and bound <= current:
+        return False
+    entry.update(lower_bound=bound, bound_by=bound_by)
+    _settle(entry)
+    return True
+
+
+def _settle(entry: dict[str, Any]) -> None:
+    """J* once the bound meets the best J (to the evaluator's tolerance)."""
+    best, bound = entry.get("best_J"), entry.get("lower_bound")
+    if best is not None and bound is not None and cost_at_least(bound, best):
+        entry.update(J_star=best, status="optimal")
+
+
+def update(run_dir: Path, sets: Iterable[Path] | None = None,
+           note: Callable[[str], None] = print) -> list[Change]:
+    """Take ``run_dir``'s better plans and bounds into the manifests of the instance sets
+    (each a directory of instances; default: the directories of the run's instance files).
+    A job's instance is found by name in a set; jobs of instances in no set are skipped, with
+    one note per set of them."""
+    with ResultStore(run_dir, create=False) as store:
+        rows = [row for row in store.rows() if row["status"] == OK]
+    if sets is None:
+        sets = sorted({Path(row["instance_file"]).parent for row in rows
+                       if row.get("instance_file")})
+    loaded = [_Set(Path(directory)) for directory in sets]
+    by_name = {name: s for s in loaded for name in s.instances}
+    changes: list[Change] = []
+    instances: dict[str, Instance] = {}
+    skipped = 0
+    for row in rows:
+        target = by_name.get(row["instance"])
+        if target is None:
+            skipped += 1
+            continue
+        name = row["instance"]
+        instance = instances.get(name) or instances.setdefault(
+            name, read_instance(target.instances[name]))
+        entry = target.entry(name)
+        found_by = _job_label(row, run_dir)
+        if row.get("solution_file"):
+            where = run_dir / row["solution_file"]
+            before = entry.get("best_J") if entry.get("best_plan") else None
+            if take_plan(entry, target.directory, instance, read_solution(where, instance),
+                         found_by, f"{run_dir} job {row['key']}"):
+                changes.append(Change(name, "plan", before, entry["best_J"],
+                                      _describe(found_by)))
+                target.changed = True
+        if row.get("lower_bound") is not None:
+            bound_by = {**found_by, "time_limit": row.get("time_limit")}
+            before = entry.get("lower_bound")
+            if take_bound(entry, float(row["lower_bound"]), bound_by,
+                          f"{run_dir} job {row['key']}"):
+                changes.append(Change(name, "bound", before, entry["lower_bound"],
+                                      _describe(found_by)))
+                target.changed = True
+    for s in loaded:
+        if s.changed:
+            write_manifest(s.manifest)
+    if skipped:
+        note(f"{skipped} job(s) of instances in none of the sets were left out")
+    return changes
+
+
+def add_task_bounds(directory: Path) -> int:
+    """Give every instance of ``directory`` at least the tasks-on-their-own bound (cheap:
+    0.06 s at 32/80); returns how many bounds it raised."""
+    from tsac_bench.formulations.task_bound import task_lower_bound
+    from tsac_bench.planning import PlanningState
+
+    target = _Set(directory)
+    raised = 0
+    for name, path in sorted(target.instances.items()):
+        bound = task_lower_bound(PlanningState.static(read_instance(path)))
+        if take_bound(target.entry(name), bound, {"method": TASK_BOUND}, str(path)):
+            raised += 1
+    if raised:
+        write_manifest(target.manifest)
+    return raised
+
+
+@dataclass(frozen=True)
+class PlanCheck:
+    instance: str
+    stored: float | None
+    evaluated: float | None
+    problem: str | None
+
+    @property
+    def passed(self) -> bool:
+        return self.problem is None
+
+
+def check(directory: Path) -> list[PlanCheck]:
+    """Re-evaluate every best plan of ``directory``'s manifest: its J must equal the stored
+    best J, and neither the bound nor J* (where set) may exceed it. A best J above J* is no
+    fault: the proof's own plan was not kept, and no run has matched it since."""
+    manifest = read_manifest(directory).require_valid()
+    checks = []
+    for name, entry in sorted(manifest.entries.items()):
+        if entry.get("best_plan") is None:
+            continue
+        instance = read_instance(directory / entry["file"])
+        try:
+            plan = read_solution(directory / entry["best_plan"], instance)
+            cost = evaluate(instance, plan).J
+        except (OSError, ValueError, InputError) as exc:
+            checks.append(PlanCheck(name, entry.get("best_J"), None, f"unreadable: {exc}"))
+            continue
+        best, bound, J_star = entry.get("best_J"), entry.get("lower_bound"), entry.get("J_star")
+        problem = None
+        if best is None or not costs_agree(cost, best):
+            problem = f"plan evaluates to {cost!r}, best_J says {best!r}"
+        elif bound is not None and not cost_at_least(best, bound):
+            problem = f"lower_bound {bound!r} above best_J"
+        elif J_star is not None and not cost_at_least(best, J_star):
+            problem = f"best_J below the proved J_star {J_star!r}"
+        checks.append(PlanCheck(name, best, cost, problem))
+    return checks
+
+
+def table(directory: Path) -> list[dict[str, Any]]:
+    """The manifest's best-known entries as rows (instance, J, bound, gap, proved, by):
+    what ``tsac-bench bks show`` prints and reports read."""
+    manifest = read_manifest(directory).require_valid()
+    rows = []
+    for name, entry in sorted(manifest.entries.items()):
+        best, bound = entry.get("best_J"), entry.get("lower_bound")
+        gap = None if best is None or bound is None or best == 0 else (best - bound) / best
+        rows.append({"instance": name, "best_J": best, "lower_bound": bound, "gap": gap,
+                     "proved": entry.get("status") == "optimal",
+                     "found_by": _describe(entry["found_by"]) if entry.get("found_by") else None,
+                     "bound_by": (_describe(entry["bound_by"])
+                                  if entry.get("bound_by", {}).get("method") != TASK_BOUND
+                                  else TASK_BOUND) if entry.get("bound_by") else None})
+    return rows

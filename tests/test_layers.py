@@ -21,6 +21,7 @@ LAYERS = (
     ("tsac_bench.reporting", "tsac_bench.reporting.data"),
     ("tsac_bench.reporting.stats", "tsac_bench.reporting.budgets"),
     ("tsac_bench.reporting.tables", "tsac_bench.reporting.figures"),
+    ("tsac_bench.reporting.budget_tables",),
     ("tsac_bench.reporting.report",),
     ("tsac_bench.cli", "tsac_bench.__main__", "tsac_bench"),
 )

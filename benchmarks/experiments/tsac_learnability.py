@@ -346,12 +346,8 @@ def run_scores(checkpoint: dict) -> dict[str, Callable[[dict[str, torch.Tensor]]
     import torch
 
     from tsac_bench.solvers.tsac.policy import Policy
-    from tsac_bench.solvers.tsac.sac import (
-        DiscreteSAC,
-        TrainConfig,
-        teacher_choice,
-        teacher_prior_of,
-    )
+    from tsac_bench.solvers.tsac.sac import DiscreteSAC, teacher_choice, teacher_prior_of
+    from tsac_bench.solvers.tsac.training import TrainConfig
 
     config = TrainConfig.from_dict(checkpoint["config"])
     sac = DiscreteSAC(config.net, config.sac, "cpu", config.teacher_prior)

@@ -151,7 +151,8 @@ def test_agree_and_veto_are_the_critics_restricted_as_documented() -> None:
     import torch
 
     from tsac_bench.solvers.tsac.net import collate
-    from tsac_bench.solvers.tsac.sac import DiscreteSAC, TrainConfig
+    from tsac_bench.solvers.tsac.sac import DiscreteSAC
+    from tsac_bench.solvers.tsac.training import TrainConfig
 
     torch.manual_seed(0)
     config = TrainConfig(teacher_prior=0.3, label_scale=2.0)

@@ -9,6 +9,7 @@ import pytest
 from test_tables import pdflatex, tabular_rows
 
 from tsac_bench.batch.store import ResultStore, job_key
+from tsac_bench.reporting.budget_tables import budget_latex, budget_markdown, primal_latex
 from tsac_bench.reporting.budgets import (
     budget_curves,
     budget_table,
@@ -21,13 +22,7 @@ from tsac_bench.reporting.budgets import (
 )
 from tsac_bench.reporting.data import load, load_meta, method_label, per_instance
 from tsac_bench.reporting.report import write_report
-from tsac_bench.reporting.tables import (
-    budget_latex,
-    budget_markdown,
-    method_table,
-    primal_latex,
-    summary,
-)
+from tsac_bench.reporting.tables import method_table, summary
 
 #: (method, budget) -> J on instances i1, i2, i3 (scale 2/4, static, seed 0). greedy is a
 #: one-pass method: the same plans at both budgets.

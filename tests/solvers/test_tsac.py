@@ -65,13 +65,11 @@ from tsac_bench.solvers.tsac.sac import (  # noqa: E402
     ReplayBuffer,
     RolloutWorkers,
     SACConfig,
-    TrainConfig,
     label_candidates,
-    replan_moments,
     rollout_values,
     teacher_prior_of,
-    train,
 )
+from tsac_bench.solvers.tsac.training import TrainConfig, replan_moments, train  # noqa: E402
 from tsac_bench.solvers.tsac.verify import VerifierConfig  # noqa: E402
 
 SMALL = NetConfig(AGENT_DIM, TASK_DIM, DEPOT_DIM, d_model=16, heads=2, layers=2,

@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 from typer.testing import CliRunner  # noqa: E402
 
 from tsac_bench.cli import app  # noqa: E402
-from tsac_bench.solvers.tsac import sac  # noqa: E402
+from tsac_bench.solvers.tsac import training  # noqa: E402
 
 runner = CliRunner()
 
@@ -25,7 +25,7 @@ def trained(monkeypatch):
         calls.append((out, config, keywords))
         return {"steps": config.steps, "episode_count": 0, "seconds": 0.0, "device": "cpu"}
 
-    monkeypatch.setattr(sac, "train", record)
+    monkeypatch.setattr(training, "train", record)
     return calls
 
 
@@ -45,7 +45,7 @@ def test_set_fields_reach_the_training_configuration(tmp_path, trained):
     assert (config.steps, config.seed, config.replan_share, config.rollouts,
             config.demonstrator, config.teacher_prior) == (4000, 3, 0.0, 4, None, 1.0)
     assert type(config.replan_share) is float and type(config.rollouts) is int
-    default = sac.TrainConfig()
+    default = training.TrainConfig()
     assert (config.warmup, config.label_share, config.curriculum, config.net) == (
         default.warmup, default.label_share, default.curriculum, default.net)
 
@@ -53,7 +53,7 @@ def test_set_fields_reach_the_training_configuration(tmp_path, trained):
 def test_without_set_the_configuration_is_the_default(tmp_path, trained):
     assert train("--out", tmp_path, "--steps", 4000).exit_code == 0
     [(_, config, _)] = trained
-    assert config == sac.TrainConfig(steps=4000, seed=0)
+    assert config == training.TrainConfig(steps=4000, seed=0)
 
 
 @pytest.mark.parametrize(("pair", "words"), [

@@ -19,6 +19,14 @@ from typing import Any
 import pandas as pd
 
 from tsac_bench.batch.store import OK
+from tsac_bench.reporting.budget_tables import (
+    budget_footing,
+    budget_latex,
+    budget_markdown,
+    budget_text,
+    primal_latex,
+    primal_markdown,
+)
 from tsac_bench.reporting.budgets import (
     budget_curves,
     budget_table,
@@ -36,18 +44,12 @@ from tsac_bench.reporting.data import (
 )
 from tsac_bench.reporting.stats import comparisons
 from tsac_bench.reporting.tables import (
-    budget_footing,
-    budget_latex,
-    budget_markdown,
-    budget_text,
     comparison_markdown,
     latex_pivot,
     latex_table,
     markdown_pivot,
     markdown_table,
     method_table,
-    primal_latex,
-    primal_markdown,
 )
 
 

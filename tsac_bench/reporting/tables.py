@@ -9,9 +9,7 @@ Two LaTeX tables per mode:
   below it, best in bold.
 Every table carries the definitions of its gaps under it.
 
-A run with budgets per plan call also gets, per mode, the table of cost against budget and
-its paired tests, and in static mode the primal-integral table (``budgets`` computes them;
-Markdown and a ``longtable`` each, in the long table's style).
+The tables of cost against budget are ``budget_tables``'s, in the long table's style.
 """
 
 from __future__ import annotations
@@ -24,18 +22,11 @@ from typing import Any
 import pandas as pd
 
 from tsac_bench.batch.store import OK
-from tsac_bench.planning.budget import (
-    ONE_PASS,
-    OVER_BUDGET_SECONDS,
-    OVER_BUDGET_SHARE,
-    reference_units,
-)
 from tsac_bench.reporting.data import (
     by_series,
     ordered_modes,
     per_instance,
     scale_order,
-    seconds_text,
 )
 from tsac_bench.reporting.stats import SGM_SHIFT, gap_measures
 
@@ -144,7 +135,7 @@ def summary(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 # --- formatting --------------------------------------------------------------------------
-def _fmt(value: Any, digits: int, percent: bool = False) -> str:
+def fmt_value(value: Any, digits: int, percent: bool = False) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "--"
     return f"{value * 100 if percent else value:.{digits}f}"
@@ -156,12 +147,13 @@ def _bold_mask(cells: pd.DataFrame) -> pd.DataFrame:
     for _, group in cells.groupby("scale", sort=False):
         for cell in SUMMARY_CELLS:
             if cell.best:
-                printed = group[cell.column].map(lambda v, c=cell: _fmt(v, c.digits, c.percent))
-                mask.loc[group.index, cell.column] = _lowest(printed)
+                printed = group[cell.column].map(
+                    lambda v, c=cell: fmt_value(v, c.digits, c.percent))
+                mask.loc[group.index, cell.column] = lowest_printed(printed)
     return mask
 
 
-def _lowest(printed: pd.Series) -> pd.Series:
+def lowest_printed(printed: pd.Series) -> pd.Series:
     """Which printed numbers equal the lowest one ("--" never)."""
     numbers = pd.to_numeric(printed.where(printed != "--"), errors="coerce")
     return (numbers == numbers.min()) if numbers.notna().any() else numbers.notna()
@@ -177,13 +169,43 @@ def latex_escape(text: str) -> str:
     return re.sub(r"[\\&%$#_{}~^]", lambda m: _LATEX_SPECIAL[m.group()], text)
 
 
-def _markdown(table: pd.DataFrame, text_columns: int) -> str:
+def markdown_grid(table: pd.DataFrame, text_columns: int) -> str:
     """A Markdown table of pre-formatted cells, numbers right-aligned."""
     align = ["left"] * text_columns + ["right"] * (len(table.columns) - text_columns)
     return table.to_markdown(index=False, disable_numparse=True, colalign=align) + "\n"
 
 
 # --- the long table ----------------------------------------------------------------------
+def longtable(columns: str, head: list[str], caption: str, label: str,
+               body: list[str], note: str) -> str:
+    """A booktabs ``longtable`` in the long table's style (``latex_table``): ``head`` repeated
+    on every page, ``note`` under it."""
+    width = len(columns)
+    return "\n".join([
+        r"\begingroup",
+        r"\footnotesize",
+        r"\setlength{\tabcolsep}{3pt}",
+        r"\begin{longtable}{" + columns + "}",
+        rf"\caption{{{caption}}}",
+        rf"\label{{{label}}} \\",
+        r"\toprule", *head, r"\midrule",
+        r"\endfirsthead",
+        rf"\multicolumn{{{width}}}{{l}}{{\emph{{Table \thetable, continued}}}} \\",
+        r"\toprule", *head, r"\midrule",
+        r"\endhead",
+        r"\midrule",
+        rf"\multicolumn{{{width}}}{{r}}{{\emph{{continued on the next page}}}} \\",
+        r"\endfoot",
+        r"\bottomrule",
+        r"\endlastfoot",
+        *body,
+        r"\end{longtable}",
+        r"\endgroup",
+        "",
+        r"\noindent{\footnotesize " + note + r"\par}",
+        ""])
+
+
 def latex_table(table: pd.DataFrame, mode: str) -> str:
     """The long booktabs table of one mode as a ``longtable``: a row group per scale, best
     values in bold, the gap definitions under it."""
@@ -209,7 +231,7 @@ def latex_table(table: pd.DataFrame, mode: str) -> str:
             previous = row["scale"]
         cells = [latex_escape(str(row["method"])), str(row["instances"])]
         for cell in SUMMARY_CELLS:
-            text = _fmt(row[cell.column], cell.digits, cell.percent)
+            text = fmt_value(row[cell.column], cell.digits, cell.percent)
             cells.append(rf"\textbf{{{text}}}" if bold.at[i, cell.column] else text)
         cells += [str(int(row["gap_n"])), str(int(row["failed"]))]
         body.append(" & ".join(cells) + r" \\")
@@ -217,7 +239,7 @@ def latex_table(table: pd.DataFrame, mode: str) -> str:
     caption = (rf"Total cost $J$ per scale $N/M$ ($N$ AAVs, $M$ tasks) and method, {mode} "
                r"mode: mean, standard deviation and median over the instances, and gaps to the "
                r"exact optimum $J^*$.")
-    return _longtable("l" + "r" * (width - 1), head, caption, f"tab:tsac-bench-{mode}", body,
+    return longtable("l" + "r" * (width - 1), head, caption, f"tab:tsac-bench-{mode}", body,
                       GAP_NOTE_LATEX)
 
 
@@ -227,12 +249,12 @@ def markdown_table(table: pd.DataFrame, mode: str) -> str:
     out = pd.DataFrame({"scale": rows["scale"], "method": rows["method"],
                         "n": rows["instances"]})
     for cell in SUMMARY_CELLS:
-        printed = rows[cell.column].map(lambda v, c=cell: _fmt(v, c.digits, c.percent))
+        printed = rows[cell.column].map(lambda v, c=cell: fmt_value(v, c.digits, c.percent))
         out[cell.markdown] = [f"**{p}**" if b else p
                               for p, b in zip(printed, bold[cell.column], strict=True)]
     out["n with J*"] = rows["gap_n"].astype(int)
     out["failed"] = rows["failed"].astype(int)
-    return _markdown(out, text_columns=2) + "\n" + GAP_NOTE_MARKDOWN + "\n"
+    return markdown_grid(out, text_columns=2) + "\n" + GAP_NOTE_MARKDOWN + "\n"
 
 
 # --- the pivot ---------------------------------------------------------------------------
@@ -262,7 +284,7 @@ def pivot_cells(table: pd.DataFrame, mode: str) -> tuple[list[str], list[str],
         group = rows[rows["scale"] == scale]
         most = group["instances"].max()
         full = group[group["instances"] == most]
-        best = _lowest(full["J_mean"].map(lambda v: _fmt(v, 2)))
+        best = lowest_printed(full["J_mean"].map(lambda v: fmt_value(v, 2)))
         for _, row in group.iterrows():
             to_bound = row["gap_n"] == 0
             n_gap = row["gap_lb_n"] if to_bound else row["gap_n"]
@@ -331,7 +353,7 @@ MARK_PARTIAL = r"\rlap{$^b$}"
 def _latex_mean(cell: PivotCell | None) -> str:
     if cell is None:
         return "--"
-    text = _fmt(cell.mean, 2)
+    text = fmt_value(cell.mean, 2)
     if cell.best:
         text = rf"\textbf{{{text}}}"
     return text + (MARK_FEWER if cell.fewer else "")
@@ -340,8 +362,8 @@ def _latex_mean(cell: PivotCell | None) -> str:
 def _latex_gap(cell: PivotCell | None) -> str:
     if cell is None or math.isnan(cell.gap):
         return ""
-    gap = _fmt(cell.gap, 1, percent=True)
-    text = f"[{_fmt(cell.gap_best, 1, percent=True)}, {gap}]" if cell.to_bound else f"({gap})"
+    gap = fmt_value(cell.gap, 1, percent=True)
+    text = f"[{fmt_value(cell.gap_best, 1, percent=True)}, {gap}]" if cell.to_bound else f"({gap})"
     return text + (MARK_PARTIAL if cell.partial else "")
 
 
@@ -351,21 +373,21 @@ def markdown_pivot(table: pd.DataFrame, mode: str) -> str:
     out = pd.DataFrame({"method": methods})
     for scale in scales:
         out[scale] = [_markdown_cell(cells.get((method, scale))) for method in methods]
-    return _markdown(out, text_columns=1) + "\n" + PIVOT_NOTE_MARKDOWN + "\n"
+    return markdown_grid(out, text_columns=1) + "\n" + PIVOT_NOTE_MARKDOWN + "\n"
 
 
 def _markdown_cell(cell: PivotCell | None) -> str:
     if cell is None:
         return "--"
-    text = _fmt(cell.mean, 2)
+    text = fmt_value(cell.mean, 2)
     if cell.best:
         text = f"**{text}**"
     if cell.fewer:
         text += f" n={cell.instances}"
     if not math.isnan(cell.gap):
-        gap = _fmt(cell.gap, 1, percent=True)
+        gap = fmt_value(cell.gap, 1, percent=True)
         part = ", part" if cell.partial else ""
-        text += (f" [{_fmt(cell.gap_best, 1, percent=True)}, {gap}{part}]" if cell.to_bound
+        text += (f" [{fmt_value(cell.gap_best, 1, percent=True)}, {gap}{part}]" if cell.to_bound
                  else f" ({gap}{part})")
     return text
 
@@ -374,270 +396,11 @@ def _markdown_cell(cell: PivotCell | None) -> str:
 def comparison_markdown(result: pd.DataFrame) -> str:
     out = pd.DataFrame({
         "method": result["method"], "n": result["instances"],
-        "mean J": result["J_mean"].map(lambda v: _fmt(v, 2)),
-        "win rate (%)": result["win_rate"].map(lambda v: _fmt(v, 1, percent=True)),
-        "mean ΔJ vs best": result["diff_mean"].map(lambda v: _fmt(v, 2)),
-        "Wilcoxon W": result["W"].map(lambda v: _fmt(v, 1)),
-        "p": result["p"].map(lambda v: _fmt(v, 4)),
-        "p (Holm)": result["p_holm"].map(lambda v: _fmt(v, 4)),
+        "mean J": result["J_mean"].map(lambda v: fmt_value(v, 2)),
+        "win rate (%)": result["win_rate"].map(lambda v: fmt_value(v, 1, percent=True)),
+        "mean ΔJ vs best": result["diff_mean"].map(lambda v: fmt_value(v, 2)),
+        "Wilcoxon W": result["W"].map(lambda v: fmt_value(v, 1)),
+        "p": result["p"].map(lambda v: fmt_value(v, 4)),
+        "p (Holm)": result["p_holm"].map(lambda v: fmt_value(v, 4)),
     })
-    return _markdown(out, text_columns=1)
-
-
-# --- cost against budget -----------------------------------------------------------------
-_OVER = (f"budget × {1 + OVER_BUDGET_SHARE:g} + {OVER_BUDGET_SECONDS:g} s")
-BUDGET_NOTE_MARKDOWN = (
-    "Each row: a method with the given seconds per plan call. Mean and median J over the "
-    "instances (each J the mean over seeds); rank by mean J among the methods at the budget. "
-    f"**Over budget**: plan calls that returned later than {_OVER}, of the plan calls timed. "
-    "**Use**: anytime (improves its plan until the budget is spent), one pass (builds one "
-    "plan and stops: the budget only caps it; its mean seconds per plan call), time limit "
-    "(searches until the budget and returns its incumbent). Bold: the lowest printed value "
-    "at a budget.")
-BUDGET_NOTE_LATEX = (
-    r"Mean and median $J$ over the instances (each $J$ the mean over seeds); Rank: by mean "
-    r"$J$ among the methods at the budget; Over: plan calls that returned later than "
-    rf"budget $\times$ {1 + OVER_BUDGET_SHARE:g} + {OVER_BUDGET_SECONDS:g}\,s, of the plan "
-    r"calls timed; Use: anytime (improves its plan until the budget is spent), one pass "
-    r"(builds one plan and stops: the budget only caps it; its mean seconds per plan call), "
-    r"time limit (searches until the budget and returns its incumbent). Best two: the two "
-    r"lowest mean $J$ at a budget on the instances both solved, the mean of $J$(second) $-$ "
-    r"$J$(best) with its 95\,\% normal interval and the two-sided Wilcoxon signed-rank $p$. "
-    r"Bold: the lowest printed value at a budget.")
-TESTS_NOTE_MARKDOWN = (
-    "The two lowest mean J at each budget, on the instances both solved: the mean of "
-    "J(second) - J(best) with its 95 % normal interval, and the two-sided Wilcoxon "
-    "signed-rank p.")
-PRIMAL_NOTE_MARKDOWN = (
-    "Static jobs at the largest budget T of each scale, over the jobs (instances and seeds). "
-    "Primal gap p(t) = 1 before the first plan, else |J(t) - J_best| / max(|J(t)|, |J_best|), "
-    "J(t) the best J found by time t of the plan call (its incumbent trace; a method without "
-    "one: its J from its runtime on), J_best the best J known for the instance (every job of "
-    "the store, and J*). **Primal integral**: the integral of p over [0, T] (Berthold 2013, as "
-    "in the 12th DIMACS Implementation Challenge), mean over the jobs; / T: the mean primal "
-    "gap. **Time to 1 % (5 %)**: median over the jobs of the first time p(t) <= 1 % (5 %), "
-    "`--` where half of the jobs or more never get there within T; in parentheses the jobs "
-    "that do.")
-PRIMAL_NOTE_LATEX = (
-    r"Static jobs at the largest budget $T$ of each scale, over the jobs (instances and "
-    r"seeds). Primal gap $p(t) = 1$ before the first plan, else $|J(t) - J_{\mathrm{best}}| "
-    r"/ \max(|J(t)|, |J_{\mathrm{best}}|)$, $J(t)$ the best $J$ found by time $t$ of the plan "
-    r"call (its incumbent trace; a method without one: its $J$ from its runtime on), "
-    r"$J_{\mathrm{best}}$ the best $J$ known for the instance (every job of the store, and "
-    r"$J^*$). Integral: $\int_0^T p(t)\,dt$ (Berthold 2013, as in the 12th DIMACS "
-    r"Implementation Challenge), mean over the jobs; $/T$: the mean primal gap. To 1\,\% "
-    r"(5\,\%): median over the jobs of the first time $p(t) \leq$ 1\,\% (5\,\%), -- where half "
-    r"of the jobs or more never get there within $T$; in parentheses the jobs that do.")
-
-
-def budget_text(budget: float, calibration: dict[str, Any] | None) -> str:
-    """``1 s (81.3 ref. units)``; the seconds alone without a calibration."""
-    units = reference_units(budget, calibration)
-    text = seconds_text(budget)
-    return text if units is None else f"{text} ({units:.3g} ref. units)"
-
-
-def budget_footing(rows: pd.DataFrame, calibration: dict[str, Any] | None) -> str:
-    """What every row of a mode's budget table shares: the budgets, the reference unit, the
-    start of every plan call and the methods that do not use a budget (plain text)."""
-    budgets = ", ".join(budget_text(b, calibration) for b in sorted(rows["budget"].unique()))
-    text = f"Budgets per plan call: {budgets}"
-    if calibration:
-        text += (f"; a reference unit is {float(calibration['seconds']):.4g} s, the time of "
-                 f"the machine-speed reference workload on {calibration.get('host', '?')} "
-                 f"(measured {calibration.get('measured_at', '?')})")
-    else:
-        text += " (no calibration recorded: seconds of the machines that ran the jobs)"
-    text += ". Every method gets the same budget per plan call"
-    if (rows["mode"] == "dynamic").any():
-        # The starts differ at a re-plan, and a comparison must say how.
-        text += (" and plans from the committed prefixes, except that DGA seeds half its "
-                 "population from the plan in force and a label with init=incumbent starts "
-                 "from it (see docs/methods.md, \"Budgets\").")
-    else:
-        text += " and plans from the committed prefixes, none in static mode (see docs/methods.md)."
-    one_pass = sorted(rows.loc[rows["use"] == ONE_PASS, "method"].unique())
-    if one_pass:
-        text += (f" One pass (builds one plan and stops; the budget only caps it): "
-                 f"{', '.join(one_pass)}.")
-    return text
-
-
-def _seconds(value: float) -> str:
-    """Seconds to three significant digits in fixed point: plan calls and primal integrals
-    span milliseconds to minutes, which no one number of decimals prints."""
-    if value is None or math.isnan(value) or math.isinf(value):
-        return "--"
-    if value == 0:
-        return "0"
-    return f"{value:.{max(0, 2 - math.floor(math.log10(abs(value))))}f}"
-
-
-def _use_text(use: str, seconds: float) -> str:
-    if use == ONE_PASS:
-        return f"one pass, {_seconds(seconds)} s"
-    return use.replace("-", " ")
-
-
-def _budget_cells(rows: pd.DataFrame) -> pd.DataFrame:
-    """The printed cells of budget-table rows, the lowest mean and median J of a budget in
-    ``**`` (for Markdown; LaTeX rewrites them)."""
-    out = pd.DataFrame(index=rows.index)
-    for column in ("J_mean", "J_median"):
-        printed = rows[column].map(lambda v: _fmt(v, 2))
-        lowest = pd.Series(False, index=rows.index)
-        for _, group in rows.groupby(["scale", "budget"], sort=False):
-            lowest[group.index] = _lowest(printed[group.index])
-        out[column] = [f"**{p}**" if b else p for p, b in zip(printed, lowest, strict=True)]
-    out["rank"] = rows["rank"].map(lambda r: "--" if pd.isna(r) else str(int(r)))
-    out["over"] = [f"{o}/{c}" for o, c in zip(rows["over_budget"], rows["plan_calls"],
-                                               strict=True)]
-    out["use"] = [_use_text(u, s) for u, s in zip(rows["use"], rows["seconds_per_call"],
-                                                  strict=True)]
-    return out
-
-
-def _difference(test: Any) -> str:
-    half = "" if math.isnan(test.diff_half_width) else f" ± {_fmt(test.diff_half_width, 2)}"
-    return f"{_fmt(test.diff_mean, 2)}{half}"
-
-
-def budget_markdown(table: pd.DataFrame, tests: pd.DataFrame, mode: str,
-                    calibration: dict[str, Any] | None) -> str:
-    """The budget table of one mode (``budgets.budget_table``) and its paired tests."""
-    rows = table[table["mode"] == mode].reset_index(drop=True)
-    cells = _budget_cells(rows)
-    out = pd.DataFrame({
-        "scale": rows["scale"],
-        "budget": rows["budget"].map(lambda b: budget_text(b, calibration)),
-        "method": rows["method"], "use": cells["use"], "n": rows["instances"].astype(str),
-        "mean J": cells["J_mean"], "median J": cells["J_median"], "rank": cells["rank"],
-        "over budget": cells["over"]})
-    text = _markdown(out, text_columns=4) + "\n" + BUDGET_NOTE_MARKDOWN + "\n"
-    tests = tests[tests["mode"] == mode]
-    if not tests.empty:
-        pairs = pd.DataFrame({
-            "scale": tests["scale"],
-            "budget": tests["budget"].map(lambda b: budget_text(b, calibration)),
-            "best": tests["best"], "second": tests["second"],
-            "n": tests["instances"].astype(str),
-            "mean ΔJ (95 % CI)": [_difference(t) for t in tests.itertuples()],
-            "Wilcoxon p": tests["p"].map(lambda v: _fmt(v, 4))})
-        text += "\n" + _markdown(pairs, text_columns=4) + "\n" + TESTS_NOTE_MARKDOWN + "\n"
-    return text
-
-
-def _longtable(columns: str, head: list[str], caption: str, label: str,
-               body: list[str], note: str) -> str:
-    """A booktabs ``longtable`` in the long table's style (``latex_table``): ``head`` repeated
-    on every page, ``note`` under it."""
-    width = len(columns)
-    return "\n".join([
-        r"\begingroup",
-        r"\footnotesize",
-        r"\setlength{\tabcolsep}{3pt}",
-        r"\begin{longtable}{" + columns + "}",
-        rf"\caption{{{caption}}}",
-        rf"\label{{{label}}} \\",
-        r"\toprule", *head, r"\midrule",
-        r"\endfirsthead",
-        rf"\multicolumn{{{width}}}{{l}}{{\emph{{Table \thetable, continued}}}} \\",
-        r"\toprule", *head, r"\midrule",
-        r"\endhead",
-        r"\midrule",
-        rf"\multicolumn{{{width}}}{{r}}{{\emph{{continued on the next page}}}} \\",
-        r"\endfoot",
-        r"\bottomrule",
-        r"\endlastfoot",
-        *body,
-        r"\end{longtable}",
-        r"\endgroup",
-        "",
-        r"\noindent{\footnotesize " + note + r"\par}",
-        ""])
-
-
-def _latex_bold(text: str) -> str:
-    """A Markdown-bold cell (``_budget_cells``) in LaTeX."""
-    if text.startswith("**"):
-        return rf"\textbf{{{text.strip('*')}}}"
-    return text
-
-
-def budget_latex(table: pd.DataFrame, tests: pd.DataFrame, mode: str,
-                 calibration: dict[str, Any] | None) -> str:
-    """The budget table of one mode as a booktabs ``longtable``: a row group per scale and
-    budget, the paired test of its best two under it."""
-    rows = table[table["mode"] == mode].reset_index(drop=True)
-    cells = _budget_cells(rows)
-    tests = tests[tests["mode"] == mode].set_index(["scale", "budget"])
-    head = [r"Method & $n$ & \multicolumn{2}{c}{$J$} & Rank & Over & Use \\",
-            r"\cmidrule(lr){3-4}",
-            r" &  & Mean & Median &  &  &  \\"]
-    body: list[str] = []
-    for (scale, budget), group in rows.groupby(["scale", "budget"], sort=False):
-        if body:
-            body.append(r"\midrule")
-        body.append(rf"\multicolumn{{7}}{{l}}{{$N/M$ = {latex_escape(str(scale))}, budget "
-                    rf"{latex_escape(budget_text(budget, calibration))}}} \\")
-        for i in group.index:
-            body.append(" & ".join([
-                latex_escape(str(rows.at[i, "method"])), str(rows.at[i, "instances"]),
-                _latex_bold(cells.at[i, "J_mean"]), _latex_bold(cells.at[i, "J_median"]),
-                cells.at[i, "rank"], cells.at[i, "over"], cells.at[i, "use"]]) + r" \\")
-        if (scale, budget) in tests.index:
-            test = tests.loc[(scale, budget)]
-            half = ("" if math.isnan(test["diff_half_width"])
-                    else rf" $\pm$ {_fmt(test['diff_half_width'], 2)}")
-            # A paragraph cell: two long method specs would not fit one line.
-            body.append(
-                r"\multicolumn{7}{p{0.9\linewidth}}{Best two: "
-                rf"{latex_escape(str(test['best']))}, {latex_escape(str(test['second']))}; "
-                rf"$\Delta J$ = {_fmt(test['diff_mean'], 2)}{half}, $p$ = "
-                rf"{_fmt(test['p'], 4)}, $n$ = {int(test['instances'])}}} \\")
-    budgets = ", ".join(latex_escape(budget_text(b, calibration))
-                        for b in sorted(rows["budget"].unique()))
-    caption = (rf"Total cost $J$ against the budget per plan call ({budgets}) per scale "
-               rf"$N/M$ and method, {mode} mode.")
-    note = latex_escape(budget_footing(rows, calibration)) + " " + BUDGET_NOTE_LATEX
-    return _longtable("lrrrrrl", head, caption, f"tab:tsac-bench-{mode}-budget", body, note)
-
-
-def _time_cell(time: float, reached: int) -> str:
-    return f"{_seconds(time)} ({reached})"
-
-
-def primal_markdown(primal: pd.DataFrame, calibration: dict[str, Any] | None) -> str:
-    """The primal-integral table (``budgets.primal_table``) in Markdown."""
-    out = pd.DataFrame({
-        "scale": primal["scale"],
-        "T": primal["horizon"].map(lambda b: budget_text(b, calibration)),
-        "method": primal["method"], "n": primal["jobs"].astype(str),
-        "primal integral (s)": primal["integral"].map(_seconds),
-        "integral / T": primal["integral_share"].map(lambda v: _fmt(v, 3)),
-        "time to 1 % (s)": [_time_cell(t, r) for t, r in zip(
-            primal["time_1"], primal["reached_1"], strict=True)],
-        "time to 5 % (s)": [_time_cell(t, r) for t, r in zip(
-            primal["time_5"], primal["reached_5"], strict=True)]})
-    return _markdown(out, text_columns=3) + "\n" + PRIMAL_NOTE_MARKDOWN + "\n"
-
-
-def primal_latex(primal: pd.DataFrame, calibration: dict[str, Any] | None) -> str:
-    """The primal-integral table as a booktabs ``longtable``, a row group per scale."""
-    head = [r"Method & $n$ & Integral (s) & $/T$ & To 1\,\% (s) & To 5\,\% (s) \\"]
-    body: list[str] = []
-    for scale, group in primal.groupby("scale", sort=False):
-        if body:
-            body.append(r"\midrule")
-        horizon = latex_escape(budget_text(group["horizon"].iloc[0], calibration))
-        body.append(rf"\multicolumn{{6}}{{l}}{{$N/M$ = {latex_escape(str(scale))}, $T$ = "
-                    rf"{horizon}}} \\")
-        for row in group.itertuples():
-            body.append(" & ".join([
-                latex_escape(str(row.method)), str(row.jobs), _seconds(row.integral),
-                _fmt(row.integral_share, 3), _time_cell(row.time_1, row.reached_1),
-                _time_cell(row.time_5, row.reached_5)]) + r" \\")
-    caption = (r"Primal integral and times to target per scale $N/M$ and method, static "
-               r"mode, at the largest budget $T$ of the scale.")
-    return _longtable("lrrrrr", head, caption, "tab:tsac-bench-static-primal", body,
-                      PRIMAL_NOTE_LATEX)
+    return markdown_grid(out, text_columns=1)

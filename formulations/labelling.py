@@ -1,0 +1,367 @@
+"""The compiled labelling of exact-bp's pricing (numba): the kernel that ``pricing.Pricer``
+feeds with the AAV's network, the task prices and the amount tables, and the label
+operations it is made of (growing the label arrays, visit tables, dominance). Kept in one
+module, apart from the Python side of pricing, because numba compiles it as one unit; the
+rules it implements (resources, dominance, the ng memory) are stated in ``pricing``.
+
+Labels live in arrays that double when full; a label is an index. Buckets hold the live
+labels of each node for the dominance tests.
+"""
+
+import time
+
+import numpy as np
+from numba import njit, objmode
+
+
+@njit(cache=True)
+def _grown1(a, size):
+    out = np.empty(size, a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _grown2(a, size):
+    out = np.empty((size, a.shape[1]), a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _grown3(a, size):
+    out = np.empty((size, a.shape[1], a.shape[2]), a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _wider(a, columns):
+    out = np.empty((a.shape[0], columns), a.dtype)
+    out[:, :a.shape[1]] = a
+    return out
+
+
+@njit(cache=True)
+def _visit_table(src, dst, delivery, price, low, high, scratch_i, scratch_v, row):
+    """dst = src after a visit with amounts low..high at ``price`` per kg:
+    min over a of src(c - a) - price * a, as a sliding-window minimum (monotone queue) of
+    src(z) + price * z over z in c - high .. c - low, less price * c; along the peak axis
+    for a delivery, along the pickup axis for a pickup, whose cell used is min(x, y) (its
+    goods also raise the peak)."""
+    size = src.shape[0]
+    for outer in range(size):
+        head = tail = 0
+        for c in range(size):
+            z = c - low
+            if z >= 0:
+                v = (src[z, outer] if delivery else src[outer, z]) + price * z
+                while tail > head and scratch_v[tail - 1] >= v:
+                    tail -= 1
+                scratch_i[tail] = z
+                scratch_v[tail] = v
+                tail += 1
+            while tail > head and scratch_i[head] < c - high:
+                head += 1
+            best = scratch_v[head] - price * c if tail > head else np.inf
+            if delivery:
+                dst[c, outer] = best
+            else:
+                row[c] = best
+        if not delivery:
+            for y in range(size):
+                dst[outer, y] = row[min(outer, y)]
+
+
+@njit(cache=True)
+def _first_visit_table(dst, least, delivery, price, low, high):
+    """The visit's table when the trip starts at a depot right before it (every cell of the
+    old table is ``least``): the largest amount the cell allows, up to ``high``."""
+    size = dst.shape[0]
+    for x in range(size):
+        for y in range(size):
+            room = x if delivery else min(x, y)
+            dst[x, y] = least - price * min(room, high) if room >= low else np.inf
+
+
+@njit(cache=True)
+def _early_cost(early_theta, early_penalty, j, theta):
+    """The penalty a visit to j at arrival term theta pays (its thresholds at or above
+    theta)."""
+    total = 0.0
+    for q in range(early_theta.shape[1]):
+        if theta <= early_theta[j, q]:
+            total += early_penalty[j, q]
+    return total
+
+
+@njit(cache=True)
+def arrival_cut_terms_kernel(pieces, j, theta):
+    """``arrival_cut_terms`` of task j's pieces (rows lo, hi, aav, closer, goods)."""
+    aav = closer = goods = 0.0
+    for q in range(pieces.shape[2]):
+        if theta > pieces[0, j, q]:
+            g = min(theta, pieces[1, j, q]) - pieces[0, j, q]
+            aav += pieces[2, j, q] * g
+            closer += pieces[3, j, q] * g
+            goods += pieces[4, j, q] * g
+    return aav, closer, goods
+
+
+@njit(cache=True)
+def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone,
+               penalised, early_theta, early_penalty, t_start, t_end, horizon, reach,
+               elementary):
+    """The rule of the module docstring; the cheap scalar tests go first (the table test
+    needs cost_a <= cost_b, its cell (B, B)). Without ``elementary`` (the ng relaxation)
+    a task in b's memory is not out of b's reach: b may come back once it forgets it."""
+    if clock[a] > clock[b] or cost[a] > cost[b] or (loaded[b] and not loaded[a]):
+        return False
+    for w in range(visited.shape[1]):
+        if visited[a, w] & ~visited[b, w]:
+            return False
+    # A penalised task (early visits pay): on b's completion a may arrive early enough to
+    # pay where b does not, at most the penalty of a's earliest arrival, unless b cannot
+    # visit it any more (visited, or out of reach before its window closes). reach[m] is
+    # the straight leg's time from a's and b's task.
+    charge = 0.0
+    if clock[a] < clock[b]:
+        for m in penalised:
+            if (elementary and (visited[b, m >> 6] >> (m & 63)) & 1) or \
+                    clock[b] + reach[m] > t_end[m]:
+                continue
+            earliest = max(t_start[m], clock[a] + reach[m])
+            charge += _early_cost(early_theta, early_penalty, m,
+                                  (earliest - t_start[m]) / horizon)
+        if cost[a] + charge > cost[b]:
+            return False
+    if not (flown[a] > max_range and flown[b] > max_range):
+        if dcum_monotone:
+            if flown[a] > flown[b]:
+                return False
+        elif flown[a] != flown[b]:
+            return False
+    # Cells with y > x repeat (x, x): a trip's pickup goods never exceed its peak, so
+    # pickup <= y adds nothing to peak <= x there.
+    ta, tb = tables[a], tables[b]
+    for x in range(ta.shape[0]):
+        for y in range(x + 1):
+            if ta[x, y] + charge > tb[x, y]:
+                return False
+    return True
+
+
+@njit(cache=True)
+def label_schedules(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
+               t_start, t_end, demand, is_delivery, timed,
+               speed, capacity, max_range, per_metre, full, dcum_monotone, horizon,
+               anchor_node, anchor_clock, anchor_flown, anchor_visited, anchor_loaded, root,
+               cover, aav_time, closer, closer_time, goods_time, visit_bonus, cut_bonus,
+               arc_bonus,
+               forbidden_task, forbidden_arc, amount_low, amount_high, theta_high,
+               early_theta, early_penalty, penalised, pieces, reach, ng_memory, elementary,
+               label_cap, deadline):
+    """Every undominated label from the anchor, extended path length by path length (with
+    ``label_cap`` > 0 only the cheapest that many per node and length go on).
+
+    Returns (cost, alive, node, parent, arc, price, low, high, tables), one entry per
+    label, the root first (parent -1). Arrival and Dcum are accumulated leg by leg in the
+    evaluator's order of float operations, so a label's clock is the evaluator's arrival."""
+    size = capacity + 1
+    n_nodes = out_first.shape[0] - 1
+    words = anchor_visited.shape[0]
+    room = 1024
+    node = np.empty(room, np.int64)
+    parent = np.empty(room, np.int64)
+    arc_of = np.empty(room, np.int64)
+    price_of = np.empty(room)
+    low_of = np.empty(room, np.int64)
+    high_of = np.empty(room, np.int64)
+    clock = np.empty(room)
+    flown = np.empty(room)
+    cost = np.empty(room)
+    alive = np.empty(room, np.bool_)
+    loaded = np.empty(room, np.bool_)
+    visited = np.empty((room, words), np.int64)
+    tables = np.empty((room, size, size))
+    node[0], parent[0], arc_of[0], price_of[0], low_of[0], high_of[0] = anchor_node, -1, -1, \
+        0.0, 0, 0
+    clock[0], flown[0], alive[0], loaded[0] = anchor_clock, anchor_flown, True, anchor_loaded
+    visited[0] = anchor_visited
+    tables[0] = root
+    cost[0] = root[size - 1, size - 1]
+    count = 1
+    bucket = np.empty((n_nodes, 64), np.int64)
+    bucket_clock = np.empty((n_nodes, 64))
+    bucket_cost = np.empty((n_nodes, 64))
+    bucket_tasks = np.empty((n_nodes, 64), np.int64)  # the first word of the visited set
+    bucket_len = np.zeros(n_nodes, np.int64)
+    frontier = np.zeros(1, np.int64)
+    scratch_i = np.empty(size, np.int64)
+    scratch_v = np.empty(size)
+    row = np.empty(size)
+    finished = True
+    extended = 0
+    while frontier.shape[0] > 0 and finished:
+        produced = np.empty(16, np.int64)
+        n_produced = 0
+        for lab in frontier:
+            if not alive[lab]:
+                continue
+            # A search's time limit must hold inside one call too: one exact pricing
+            # call can take minutes where the labels explode.
+            extended += 1
+            if extended % 256 == 0:
+                with objmode(now="float64"):
+                    now = time.perf_counter()
+                if now > deadline:
+                    finished = False
+                    break
+            here = node[lab]
+            for a in range(out_first[here], out_first[here + 1]):
+                j = arc_head[a]
+                if (visited[lab, j >> 6] >> (j & 63)) & 1 or forbidden_task[j] \
+                        or forbidden_arc[a]:
+                    continue
+                t, f = clock[lab], flown[lab]
+                leg = arc_leg1[a]
+                f += leg
+                t += leg / speed
+                new_trip, has_goods = arc_depot[a], loaded[lab]
+                if new_trip:
+                    leg = arc_leg2[a]
+                    f += leg
+                    t += leg / speed
+                    has_goods = True
+                if t < t_start[j]:
+                    t = t_start[j]
+                if t > t_end[j]:
+                    continue
+                if is_delivery[j] and not has_goods:
+                    continue
+                c = per_metre * leg if f <= max_range else full
+                c -= visit_bonus[j] + arc_bonus[a]
+                c -= cut_bonus[j]
+                p = cover[j]
+                if timed[j]:
+                    theta = (t - t_start[j]) / horizon
+                    if theta > theta_high[j]:
+                        continue
+                    c += _early_cost(early_theta, early_penalty, j, theta)
+                    c += aav_time[j] * theta
+                    cut_aav, cut_closer, cut_goods = arrival_cut_terms_kernel(pieces, j, theta)
+                    c += cut_aav
+                    c += min(0.0, closer_time[j] * theta + cut_closer - closer[j])
+                    p -= goods_time[j] * theta
+                    p -= cut_goods
+                a_low = amount_low[j]
+                a_high = min(demand[j], capacity, amount_high[j])
+                # With no value on goods, more than the least amount only uses capacity.
+                if p <= 0.0:
+                    a_high = min(a_high, a_low)
+                if a_high < a_low:
+                    continue
+                if count == node.shape[0]:
+                    room = 2 * count
+                    node, parent, arc_of = (_grown1(node, room), _grown1(parent, room),
+                                            _grown1(arc_of, room))
+                    price_of, low_of, high_of = (_grown1(price_of, room),
+                                                 _grown1(low_of, room), _grown1(high_of, room))
+                    clock, flown, cost = (_grown1(clock, room), _grown1(flown, room),
+                                          _grown1(cost, room))
+                    alive, loaded = _grown1(alive, room), _grown1(loaded, room)
+                    visited, tables = _grown2(visited, room), _grown3(tables, room)
+                k = count
+                if new_trip:
+                    _first_visit_table(tables[k], cost[lab], is_delivery[j], p, a_low, a_high)
+                else:
+                    _visit_table(tables[lab], tables[k], is_delivery[j], p, a_low, a_high,
+                                 scratch_i, scratch_v, row)
+                if not np.isfinite(tables[k, size - 1, size - 1]):
+                    continue
+                tables[k] += c
+                node[k], parent[k], arc_of[k], price_of[k] = j, lab, a, p
+                low_of[k], high_of[k] = a_low, a_high
+                clock[k], flown[k], cost[k] = t, f, tables[k, size - 1, size - 1]
+                alive[k], loaded[k] = True, has_goods
+                visited[k] = visited[lab] & ng_memory[j]
+                visited[k, j >> 6] |= np.int64(1) << (j & 63)
+                # Dominance within the bucket of node j; its labels' clocks, costs and
+                # (first words of) visited sets are kept side by side so that the scan
+                # reads contiguous memory and tests the rest only where those allow it.
+                members = bucket_len[j]
+                rejected = False
+                tasks = visited[k, 0]
+                for i in range(members):
+                    if bucket_clock[j, i] <= t and bucket_cost[j, i] <= cost[k] and \
+                            bucket_tasks[j, i] & ~tasks == 0:
+                        other = bucket[j, i]
+                        if alive[other] and _dominates(other, k, clock, cost, loaded, visited,
+                                                       flown, tables, max_range,
+                                                       dcum_monotone, penalised,
+                                                       early_theta, early_penalty,
+                                                       t_start, t_end, horizon, reach[j],
+                                                       elementary):
+                            rejected = True
+                            break
+                if rejected:
+                    continue
+                kept = 0
+                for i in range(members):
+                    other = bucket[j, i]
+                    if not alive[other]:
+                        continue
+                    if bucket_clock[j, i] >= t and bucket_cost[j, i] >= cost[k] and \
+                            tasks & ~bucket_tasks[j, i] == 0 and \
+                            _dominates(k, other, clock, cost, loaded, visited, flown, tables,
+                                       max_range, dcum_monotone, penalised,
+                                       early_theta, early_penalty,
+                                       t_start, t_end, horizon, reach[j], elementary):
+                        alive[other] = False
+                        continue
+                    bucket[j, kept] = other
+                    bucket_clock[j, kept] = bucket_clock[j, i]
+                    bucket_cost[j, kept] = bucket_cost[j, i]
+                    bucket_tasks[j, kept] = bucket_tasks[j, i]
+                    kept += 1
+                if kept == bucket.shape[1]:
+                    bucket = _wider(bucket, 2 * kept)
+                    bucket_clock = _wider(bucket_clock, 2 * kept)
+                    bucket_cost = _wider(bucket_cost, 2 * kept)
+                    bucket_tasks = _wider(bucket_tasks, 2 * kept)
+                bucket[j, kept] = k
+                bucket_clock[j, kept] = t
+                bucket_cost[j, kept] = cost[k]
+                bucket_tasks[j, kept] = tasks
+                bucket_len[j] = kept + 1
+                count += 1
+                if n_produced == produced.shape[0]:
+                    produced = _grown1(produced, 2 * n_produced)
+                produced[n_produced] = k
+                n_produced += 1
+        frontier = produced[:n_produced].copy()
+        if label_cap > 0:
+            frontier = _cheapest_per_node(frontier, node, cost, alive, label_cap, n_nodes)
+    return (cost[:count], alive[:count], node[:count], parent[:count], arc_of[:count],
+            price_of[:count], low_of[:count], high_of[:count], tables[:count], finished)
+
+
+@njit(cache=True)
+def _cheapest_per_node(labels, node, cost, alive, cap, n_nodes):
+    """The live ``labels`` that are among the ``cap`` cheapest of their node (ties: the
+    earlier label); the others are marked dead (the heuristic label budget)."""
+    order = np.argsort(cost[labels], kind="mergesort")
+    taken = np.zeros(n_nodes, np.int64)
+    keep = np.zeros(labels.shape[0], np.bool_)
+    for i in order:
+        lab = labels[i]
+        if not alive[lab]:
+            continue
+        if taken[node[lab]] < cap:
+            taken[node[lab]] += 1
+            keep[i] = True
+        else:
+            alive[lab] = False
+    return labels[keep]
+
+

@@ -137,15 +137,27 @@ def run_budgets(args: argparse.Namespace) -> None:
                             **{**common, "budgets": [args.knee]}))
 
 
+def complete_instances(table: pd.DataFrame) -> pd.DataFrame:
+    """The rows of the instances that every method of their mode and budget has a result on:
+    a sweep stopped between sessions leaves a chunk part-run, and means over different
+    instances would not compare the methods."""
+    cell = ["mode", "budget"]
+    methods = table.groupby(cell)["method"].transform("nunique")
+    done = table.groupby([*cell, "scale", "instance"])["method"].transform("nunique")
+    return table[done == methods]
+
+
 def budget_per_instance(frame: pd.DataFrame) -> pd.DataFrame:
     """The budgeted ok jobs as (mode, scale, instance, method, budget) rows: J the mean over
     seeds (``budgets.budgeted_instances``), over_budget the plan calls over budget summed
-    over seeds; what the headline is computed from (committed as ``BUDGET_TABLE``)."""
+    over seeds, of the instances every method has run (``complete_instances``); what the
+    headline is computed from (committed as ``BUDGET_TABLE``)."""
     keys = ["mode", "scale", "instance", "method", "budget"]
     rows = budgeted_instances(frame)
     ok = frame[(frame["status"] == "ok") & frame["budget"].notna()]
     over = ok.groupby(keys)["over_budget"].sum().rename("over_budget")
-    table = rows[[*keys, "J", "seeds"]].merge(over, left_on=keys, right_index=True)
+    table = complete_instances(
+        rows[[*keys, "J", "seeds"]].merge(over, left_on=keys, right_index=True))
     scales = {s: i for i, s in enumerate(scale_order(table["scale"]))}
     return table.sort_values(keys, key=lambda c: c.map(scales) if c.name == "scale"
                              else c).reset_index(drop=True)

@@ -67,6 +67,17 @@ def budget_rows() -> pd.DataFrame:
                          for k, J in enumerate(pair)])
 
 
+def test_only_instances_every_method_ran_count() -> None:
+    rows = [("dynamic", 3.0, "4/10", i, m) for i in ("a", "b") for m in ("dga", "hocf")]
+    rows.append(("dynamic", 3.0, "4/10", "c", "dga"))  # hocf has not run c yet
+    rows.append(("static", 1.0, "4/10", "c", "dga"))  # the only method at this budget
+    table = pd.DataFrame(rows, columns=["mode", "budget", "scale", "instance", "method"])
+    kept = paper_reproduction.complete_instances(table)
+    assert sorted(zip(kept["mode"], kept["instance"], strict=True)) == [
+        ("dynamic", "a"), ("dynamic", "a"), ("dynamic", "b"), ("dynamic", "b"),
+        ("static", "c")]
+
+
 def test_the_best_at_each_budget_with_its_paired_interval() -> None:
     # a - b per instance: -1, -2; mean -1.5, half-width 1.96 * 0.7071 / sqrt(2) = 0.98.
     assert paper_reproduction.best_at_each_budget(budget_rows(), "static")[2:] == [

@@ -31,8 +31,12 @@ def small_set(tmp_path):
                                                    "best_J")}
                              for k, v in manifest["instances"].items() if k in SMALL}
     del manifest["budgets"]  # one job per method and mode is enough here
-    # The unproved instance starts with no best J (prove recorded CP-SAT's, without a plan).
-    del manifest["instances"]["quick-4-10-s5"]["best_J"]
+    # The 4/10 instance as `prove` left it before exact-bp proved it: a bound, no best J.
+    manifest["instances"]["quick-4-10-s5"] = {"file": "quick-4-10-s5.json", "J_star": None,
+                                              "lower_bound": 1.38, "status": "feasible"}
+    # One proved instance as if nothing were known of it yet.
+    manifest["instances"]["quick-2-5-s2"] = {"file": "quick-2-5-s2.json", "J_star": None,
+                                             "lower_bound": None, "status": "feasible"}
     (directory / "manifest.json").write_text(json.dumps(manifest))
     for name in SMALL:
         shutil.copy(QUICK / f"{name}.json", directory)
@@ -49,12 +53,19 @@ def test_a_run_brings_its_best_offline_plan_and_bounds_into_the_manifest(small_s
     changes = best_known.update(run, [small_set], note=lambda line: None)
 
     entries = read_manifest(small_set).entries
-    for name in ("quick-2-4-s1", "quick-2-5-s2"):
-        # Proved before, without a plan: the first job's plan that reaches J* is stored.
-        entry = entries[name]
-        assert entry["J_star"] == before[name]["J_star"] and entry["status"] == "optimal"
-        assert entry["best_J"] == pytest.approx(before[name]["J_star"], rel=1e-9)
-        assert entry["found_by"]["method"] in {"greedy", "hocf", "exact"}
+    # Proved before, without a plan: the first job's plan that reaches J* is stored.
+    entry = entries["quick-2-4-s1"]
+    assert entry["J_star"] == before["quick-2-4-s1"]["J_star"] and entry["status"] == "optimal"
+    assert entry["best_J"] == pytest.approx(entry["J_star"], rel=1e-9)
+    assert entry["found_by"]["method"] in {"greedy", "hocf", "exact"}
+    # Unknown before: exact's proof (its own stats' bound, not the row's reference column)
+    # settles it at the J* of quick's manifest.
+    entry = entries["quick-2-5-s2"]
+    J_star = json.loads((QUICK / "manifest.json").read_text())["instances"]["quick-2-5-s2"][
+        "J_star"]
+    assert entry["status"] == "optimal" and entry["bound_by"]["method"] == "exact"
+    assert entry["J_star"] == entry["best_J"] == pytest.approx(J_star, rel=1e-9)
+    assert entry["lower_bound"] == pytest.approx(J_star, rel=1e-6)
     # The unproved 4/10 instance: the lowest J of greedy and hocf in either mode, each
     # dynamic plan counted with its stamps removed.
     instance = read_instance(small_set / "quick-4-10-s5.json")

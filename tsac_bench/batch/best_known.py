@@ -37,6 +37,7 @@ from tsac_bench.errors import InputError
 from tsac_bench.model import Instance, Solution, Visit
 from tsac_bench.model.evaluator import cost_at_least, costs_agree, evaluate
 from tsac_bench.model.io import read_instance, read_solution, write_solution
+from tsac_bench.planning import mip_gap, recorded_claim
 
 TASK_BOUND = "tasks-on-their-own"
 
@@ -125,7 +126,8 @@ def take_bound(entry: dict[str, Any], bound: float, bound_by: dict[str, Any],
         raise InputError(where, "lower_bound", f"{bound!r} from {_describe(bound_by)} is above "
                          f"the best-known J {best!r}: a bound that is not a bound")
     current = entry.get("lower_bound")
-    if current is not None and bound <= current:
+    # Within the evaluator's tolerance a bound is no news (solvers differ in the last bits).
+    if current is not None and cost_at_least(current, bound):
         return False
     entry.update(lower_bound=bound, bound_by=bound_by)
     _settle(entry)
@@ -133,9 +135,14 @@ def take_bound(entry: dict[str, Any], bound: float, bound_by: dict[str, Any],
 
 
 def _settle(entry: dict[str, Any]) -> None:
-    """J* once the bound meets the best J (to the evaluator's tolerance)."""
+    """J* once the bound meets the best J (to the evaluator's tolerance); the gap `prove`
+    recorded kept true."""
     best, bound = entry.get("best_J"), entry.get("lower_bound")
-    if best is not None and bound is not None and cost_at_least(bound, best):
+    if best is None or bound is None:
+        return
+    if "mip_gap" in entry:
+        entry["mip_gap"] = mip_gap(best, bound)
+    if cost_at_least(bound, best):
         entry.update(J_star=best, status="optimal")
 
 
@@ -173,11 +180,14 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
                 changes.append(Change(name, "plan", before, entry["best_J"],
                                       _describe(found_by)))
                 target.changed = True
-        if row.get("lower_bound") is not None:
+        # The job's own claim (its stats), not the row's lower_bound column, which is the
+        # manifest's bound copied in when the job was planned. A dynamic run's plan calls
+        # bound their re-planning states, not the instance.
+        _, bound = recorded_claim(row.get("stats"))
+        if bound is not None and row["mode"] == "static":
             bound_by = {**found_by, "time_limit": row.get("time_limit")}
             before = entry.get("lower_bound")
-            if take_bound(entry, float(row["lower_bound"]), bound_by,
-                          f"{run_dir} job {row['key']}"):
+            if take_bound(entry, bound, bound_by, f"{run_dir} job {row['key']}"):
                 changes.append(Change(name, "bound", before, entry["lower_bound"],
                                       _describe(found_by)))
                 target.changed = True

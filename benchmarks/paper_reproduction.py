@@ -211,7 +211,8 @@ def headline_block(table: pd.DataFrame) -> list[str]:
         f"Dynamic mode, {budget:g} s per plan call for every method (the same budget: the "
         "equal-budget footing of docs/methods.md, \"Budgets\", where the knee of a static "
         "sweep on validation instances chose it), the first instances by seed "
-        "of `instances/paper-mc/`, one seed, each plan call from the "
+        "of `instances/paper-mc/` that every method has run, one seed, one job at a time on a "
+        "core of its own, each plan call from the "
         "committed prefixes alone (`init=empty`) unless the label says `init=incumbent` (the "
         "plan in force; DGA seeds half its population from it, PyVRP plans from the prefixes), "
         "`greedy` and `cnp` one pass: median J (mean J), lower is better; "
@@ -226,7 +227,10 @@ def headline_block(table: pd.DataFrame) -> list[str]:
         "",
         "Static mode, the best method at each budget (mean J over the instances, each the mean "
         "over its 3 seeds, one seed of `greedy` and `cnp`) and its paired difference to the "
-        "second:",
+        "second. Not yet at equal computing: the sweep ran two jobs on the machine's two "
+        "cores, and DGA's rows were re-run later on a core of their own, where DGA built 1.2-2 "
+        "times the individuals per call at 3 s (docs/methods.md, \"One job per dedicated "
+        "core\"); the others' re-run so is to come:",
         "",
         *best_at_each_budget(table, "static"),
     ]

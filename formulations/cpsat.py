@@ -35,6 +35,7 @@ from typing import Any
 
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import mip_gap
 
 
 @dataclass(frozen=True)
@@ -380,7 +381,7 @@ def solve_cpsat(instance: Instance, tasks: Sequence[int] | None = None, *,
             - data.scale.slack(instance)
     status = {cp_model.OPTIMAL: "optimal", cp_model.FEASIBLE: "feasible",
               cp_model.UNKNOWN: "no-solution"}.get(code, "error")
-    gap = None if J is None or bound is None else max(0.0, J - bound) / max(abs(J), 1e-10)
+    gap = None if J is None or bound is None else mip_gap(J, bound)
     stats = {
         "status": status, "objective": J, "scaled_objective": objective,
         "lower_bound": bound, "mip_gap": gap, "solver": "cp-sat",

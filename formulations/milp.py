@@ -35,6 +35,7 @@ from tsac_bench.formulations.network import (
 )
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import mip_gap
 
 
 @dataclass
@@ -267,12 +268,6 @@ class SolveReport:
             "threads", "seed", "wall_time", "stop_reason")}
 
 
-def relative_gap(objective: float | None, bound: float | None) -> float | None:
-    if objective is None or bound is None:
-        return None
-    return max(0.0, objective - bound) / max(abs(objective), 1e-10)
-
-
 def solve_milp(model: Any, *, time_limit: float | None = None, threads: int = 1,
                mip_rel_gap: float = 1e-9, seed: int = 0, warm: bool = False,
                log: bool = False) -> SolveReport:
@@ -326,8 +321,9 @@ def solve_milp(model: Any, *, time_limit: float | None = None, threads: int = 1,
         status = "no-solution"
     if bound is not None and not math.isfinite(bound):
         bound = None
-    return SolveReport(status, objective, bound, relative_gap(objective, bound), "highs",
-                       version, threads, seed, wall, condition.name, has_solution)
+    gap = None if objective is None or bound is None else mip_gap(objective, bound)
+    return SolveReport(status, objective, bound, gap, "highs", version, threads, seed, wall,
+                       condition.name, has_solution)
 
 
 def canonical_warm_start(model: Any, routes: Sequence[Route],

@@ -34,6 +34,7 @@ from tsac_bench.planning import (
     PlanResult,
     Settings,
     declare,
+    mip_gap,
 )
 from tsac_bench.planning.budget import TIME_LIMIT
 from tsac_bench.solvers.greedy import GreedyAllocator
@@ -241,5 +242,5 @@ def _checked(state: PlanningState, evaluator: CostEvaluator, routes: tuple,
     stats["solver_lower_bound"] = stats.get("lower_bound")
     bound = max(b for b in (stats["solver_lower_bound"], stats["task_bound"]) if b is not None)
     stats["lower_bound"] = bound
-    stats["mip_gap"] = max(0.0, J - bound) / max(abs(J), 1e-10)
+    stats["mip_gap"] = mip_gap(J, bound)
     return PlanResult.from_solver(routes, stats)

@@ -203,10 +203,12 @@ def budget_headline(table: pd.DataFrame, budget: float) -> list[str]:
 
 def headline_block(table: pd.DataFrame) -> list[str]:
     """The README's generated block: the caption, the headline table at the dynamic runs'
-    budget and the best method at each budget of the static sweep."""
-    dynamic = table[table["mode"] == "dynamic"]
+    budget, the best method at each scale and where the static sweep is."""
+    dynamic, static = (table[table["mode"] == mode] for mode in ("dynamic", "static"))
     budget = float(dynamic["budget"].max())
     over = int(table["over_budget"].sum())
+    static_budgets = set(static["budget"])
+    static_instances = int(static.groupby("scale")["instance"].nunique().min())
     return [
         f"Dynamic mode, {budget:g} s per plan call for every method (the same budget: the "
         "equal-budget footing of docs/methods.md, \"Budgets\", where the knee of a static "
@@ -225,14 +227,13 @@ def headline_block(table: pd.DataFrame) -> list[str]:
         "",
         *best_at_each_budget(table, "dynamic"),
         "",
-        "Static mode, the best method at each budget (mean J over the instances, each the mean "
-        "over its 3 seeds, one seed of `greedy` and `cnp`) and its paired difference to the "
-        "second. Not yet at equal computing: the sweep ran two jobs on the machine's two "
+        f"The static sweep ({', '.join(f'{b:g}' for b in sorted(static_budgets))} s, "
+        f"{static_instances} instances per scale, 3 seeds): "
+        "[reports/paper-reproduction/budgets/index.md](reports/paper-reproduction/budgets/"
+        "index.md). It is not yet at equal computing: it ran two jobs on the machine's two "
         "cores, and DGA's rows were re-run later on a core of their own, where DGA built 1.2-2 "
         "times the individuals per call at 3 s (docs/methods.md, \"One job per dedicated "
-        "core\"); the others' re-run so is to come:",
-        "",
-        *best_at_each_budget(table, "static"),
+        "core\"); the others' re-run so is to come.",
     ]
 
 

@@ -148,3 +148,20 @@ def test_the_command_line_updates_shows_and_verifies_the_plans(small_set, tmp_pa
     assert invoke("verify", small_set, "--plans-only").exit_code == 1
     missing = invoke("bks", "update", tmp_path / "nowhere")
     assert missing.exit_code == 2 and len(missing.output.strip().splitlines()) == 1
+
+
+def test_a_fresh_proof_keeps_the_plan_and_bound_it_did_not_beat():
+    old = {"file": "x.json", "J_star": None, "lower_bound": 8.0, "status": "feasible",
+           "best_J": 10.0, "best_plan": "best-known/x.json", "found_by": {"method": "dga"},
+           "bound_by": {"method": "exact-bp"}}
+    # prove's own entry: its backends found 11 over a bound of 7.
+    fresh = {"file": "x.json", "J_star": None, "lower_bound": 7.0, "status": "feasible",
+             "best_J": 11.0, "mip_gap": 4 / 11}
+    kept = best_known.carried_over(old, fresh)
+    assert (kept["best_J"], kept["best_plan"], kept["found_by"]) == (10.0, "best-known/x.json",
+                                                                     {"method": "dga"})
+    assert (kept["lower_bound"], kept["bound_by"]) == (8.0, {"method": "exact-bp"})
+    assert kept["mip_gap"] == pytest.approx(0.2) and kept["status"] == "feasible"
+    # A proof that reaches the stored plan's J settles it.
+    proved = best_known.carried_over(old, {**fresh, "lower_bound": 10.0, "best_J": 10.5})
+    assert proved["status"] == "optimal" and proved["J_star"] == 10.0

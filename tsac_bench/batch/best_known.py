@@ -146,6 +146,23 @@ def _settle(entry: dict[str, Any]) -> None:
         entry.update(J_star=best, status="optimal")
 
 
+def carried_over(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
+    """``new`` (an entry ``prove`` made afresh) with what ``old`` knew that it does not: the
+    stored plan where no lower J came with ``new``, the bound where ``new``'s is lower."""
+    entry = dict(new)
+    if old.get("best_plan") and (entry.get("best_J") is None
+                                 or cost_at_least(entry["best_J"], old["best_J"])):
+        entry.update({key: old[key] for key in ("best_J", "best_plan", "found_by")})
+    if old.get("lower_bound") is not None and (entry.get("lower_bound") is None or not
+                                               cost_at_least(entry["lower_bound"],
+                                                             old["lower_bound"])):
+        entry["lower_bound"] = old["lower_bound"]
+        if old.get("bound_by"):
+            entry["bound_by"] = old["bound_by"]
+    _settle(entry)
+    return entry
+
+
 def update(run_dir: Path, sets: Iterable[Path] | None = None,
            note: Callable[[str], None] = print) -> list[Change]:
     """Take ``run_dir``'s better plans and bounds into the manifests of the instance sets

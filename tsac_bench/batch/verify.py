@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from tsac_bench.batch.best_known import carried_over
 from tsac_bench.batch.manifests import (
     Manifest,
     iter_instance_files,
@@ -92,7 +93,8 @@ def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
         results = dict(manifest.entries.get(name, {}).get("solvers", {}))
         for m in methods:
             results[m] = solve_exact(file, m, time_limit, threads) | {"command": command}
-        entry = entry_from(results, file.name, command)
+        entry = carried_over(manifest.entries.get(name, {}),
+                             entry_from(results, file.name, command))
         manifest.entries[name] = entry
         log(f"{name}: {entry['status']} J*={entry['J_star']} LB={entry['lower_bound']:.6f} "
             + " ".join(f"{m}={r['status']}/{r['wall_time']:.1f}s" for m, r in results.items()))

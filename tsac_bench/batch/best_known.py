@@ -106,9 +106,11 @@ def take_plan(entry: dict[str, Any], directory: Path, instance: Instance, soluti
     if J_star is not None and not cost_at_least(cost, J_star):
         raise InputError(where, "J", f"{cost!r} from {_describe(found_by)} is below the proved "
                          f"J* {J_star!r}: the proof or the plan is wrong")
-    if best is not None and (cost_at_least(cost, best) if entry.get("best_plan")
-                             else not costs_agree(cost, best) and cost > best):
-        return False
+    if best is not None:
+        no_lower = cost_at_least(cost, best)
+        # Without a stored plan, one that matches the recorded best J is taken too.
+        if no_lower and (entry.get("best_plan") or not costs_agree(cost, best)):
+            return False
     relative = f"{PLAN_FOLDER}/{instance.name}.json"
     write_solution(plan.with_cost(cost).with_meta(found_by=found_by), instance,
                    directory / relative, compact=True)
@@ -168,7 +170,7 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
     """Take ``run_dir``'s better plans and bounds into the manifests of the instance sets
     (each a directory of instances; default: the directories of the run's instance files).
     A job's instance is found by name in a set; jobs of instances in no set are skipped, with
-    one note per set of them."""
+    one note saying how many."""
     with ResultStore(run_dir, create=False) as store:
         rows = [row for row in store.rows() if row["status"] == OK]
     if sets is None:
@@ -185,8 +187,9 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
             skipped += 1
             continue
         name = row["instance"]
-        instance = instances.get(name) or instances.setdefault(
-            name, read_instance(target.instances[name]))
+        if name not in instances:
+            instances[name] = read_instance(target.instances[name])
+        instance = instances[name]
         entry = target.entry(name)
         found_by = _job_label(row, run_dir)
         if row.get("solution_file"):
@@ -274,17 +277,15 @@ def check(directory: Path) -> list[PlanCheck]:
 
 
 def table(directory: Path) -> list[dict[str, Any]]:
-    """The manifest's best-known entries as rows (instance, J, bound, gap, proved, by):
-    what ``tsac-bench bks show`` prints and reports read."""
+    """The manifest's best-known entries as rows (instance, J, bound, gap, proved, by): what
+    ``tsac-bench bks show`` prints."""
     manifest = read_manifest(directory).require_valid()
     rows = []
     for name, entry in sorted(manifest.entries.items()):
         best, bound = entry.get("best_J"), entry.get("lower_bound")
-        gap = None if best is None or bound is None or best == 0 else (best - bound) / best
-        rows.append({"instance": name, "best_J": best, "lower_bound": bound, "gap": gap,
-                     "proved": entry.get("status") == "optimal",
-                     "found_by": _describe(entry["found_by"]) if entry.get("found_by") else None,
-                     "bound_by": (_describe(entry["bound_by"])
-                                  if entry.get("bound_by", {}).get("method") != TASK_BOUND
-                                  else TASK_BOUND) if entry.get("bound_by") else None})
+        by = {key: _describe(entry[key]) if entry.get(key) else None
+              for key in ("found_by", "bound_by")}
+        rows.append({"instance": name, "best_J": best, "lower_bound": bound,
+                     "gap": None if best is None or bound is None else mip_gap(best, bound),
+                     "proved": entry.get("status") == "optimal", **by})
     return rows

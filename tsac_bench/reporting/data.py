@@ -94,6 +94,7 @@ def references(frame: pd.DataFrame) -> pd.DataFrame:
     """Per instance: J_star, lower_bound and where J* came from (see the module notes)."""
     instances = frame["instance"].drop_duplicates().sort_values()
     refs = pd.DataFrame(index=pd.Index(instances, name="instance"))
+    # A frame made by hand (not read from a store) may lack the newer best_J column.
     columns = [c for c in ("J_star", "lower_bound", "best_J") if c in frame]
     manifest = frame.groupby("instance")[columns].max().reindex(columns=["J_star",
                                                                        "lower_bound", "best_J"])

@@ -50,8 +50,9 @@ NOTES = (
     "Notes: an unproved run counts as slower than the limit in the median. The gap of an "
     "optimal CP-SAT run is the scaling slack its reported bound subtracts (docs/"
     "formulations.md), not an open gap. exact and exact-cpsat start from the greedy plan, "
-    "exact-bp from the better of greedy and dga; its root bound is the Lagrangian bound of "
-    "the route master at the root node.")
+    "exact-bp from the best of greedy, dga and 100 hocf games (rows measured before the "
+    "games were a start: the better of greedy and dga; see the start J column); its root "
+    "bound is the Lagrangian bound of the route master at the root node.")
 
 
 def solve_one(size: str, seed: int, method: str, time_limit: float, threads: int) -> dict:

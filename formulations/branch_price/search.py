@@ -130,13 +130,13 @@ class BranchPrice:
                 "converged": converged, "columns": self.master.generated,
                 "seconds": time.perf_counter() - began}
 
-    def solve(self, incumbent: Sequence[Route], time_limit: float | None = None
+    def solve(self, starts: Sequence[Plan], time_limit: float | None = None
               ) -> BranchPriceResult:
-        """The optimum from ``incumbent`` on, or at ``time_limit`` the best plan and the
-        least bound of the open nodes."""
+        """The optimum from the best of ``starts`` on (each plan's routes are columns), or
+        at ``time_limit`` the best plan and the least bound of the open nodes."""
         began = time.perf_counter()
         run = _Run(began, math.inf if time_limit is None else began + time_limit)
-        best = self._start(incumbent)
+        best = self._start(starts)
         open_nodes = _OpenNodes()
         while open_nodes.heap:
             bound, tie, decisions, basis = heapq.heappop(open_nodes.heap)
@@ -158,13 +158,27 @@ class BranchPrice:
                 break
         return self._result(run, best, open_nodes)
 
-    def _start(self, incumbent: Sequence[Route]) -> _Incumbent:
-        """The incumbent in canonical form, its routes the first columns, each task closed
-        by its latest member (its J exactly)."""
+    def _start(self, starts: Sequence[Plan]) -> _Incumbent:
+        """The best of ``starts`` as the incumbent; every start in canonical form, its
+        routes the first columns (the integer master and the dives combine them)."""
+        if not starts:
+            raise ValueError("exact-bp needs at least one start plan")
+        best = None
+        for plan in starts:
+            routes = self._start_columns(plan)
+            if best is None:
+                best = _Incumbent(self.master.evaluator, routes,
+                                  self.master.evaluator.cost(routes))
+            else:
+                best.offer(routes)
+        return best
+
+    def _start_columns(self, plan: Plan) -> Plan:
+        """A start plan in canonical form, its routes added as columns, each task closed by
+        its latest member (the plan's J exactly)."""
         master = self.master
         free = [len(p) for p in master.committed]
-        routes = canonical_routes(master.instance, incumbent, free, master.plan_time)
-        best = _Incumbent(master.evaluator, routes, master.evaluator.cost(routes))
+        routes = canonical_routes(master.instance, plan, free, master.plan_time)
         latest: dict[int, tuple[float, int]] = {}
         for trace in master.evaluator.evaluate(routes).traces:
             for m, c in trace.contributions:
@@ -176,7 +190,7 @@ class BranchPrice:
             if tail:
                 master.add_column(n, tail, frozenset(m for m, (_, k) in latest.items()
                                                      if k == n))
-        return best
+        return routes
 
     def _node(self, bound: float, decisions: tuple[BranchDecision, ...],
               basis: Basis | None, parent: tuple | None, run: _Run, best: _Incumbent,

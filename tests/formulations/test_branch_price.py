@@ -743,3 +743,44 @@ def test_the_large_instance_measures_switch_on_from_20_and_30_tasks() -> None:
     assert large.options.ng_growth_rounds == 5
     chosen = search_of(generate("4/10", 1), ng_size=3, primal_resolves=True)
     assert (chosen.options.ng_size, chosen.options.primal_resolves) == (3, True)
+
+
+def test_the_search_keeps_the_best_of_its_starts_and_prices_from_all_of_them() -> None:
+    # 8/20 seed 1: greedy's plan J 32.59, 20 HOCF games' 20.49; in either order the search
+    # returns at least the better one, and both plans' routes (in canonical form) are
+    # columns of the master.
+    from tsac_bench.formulations.network import canonical_routes
+    from tsac_bench.model.generator import generate
+
+    instance = generate("8/20", 1)
+    state = PlanningState.static(instance)
+    evaluator = CostEvaluator(instance)
+    greedy = make_allocator("greedy").plan(state).routes
+    games = make_allocator("hocf", samples=20).plan(state, seed=0).routes
+    assert evaluator.cost(games) < evaluator.cost(greedy) - 10
+    for starts in ([greedy, games], [games, greedy]):
+        search = BranchPrice(instance)
+        result = search.solve(starts, time_limit=0.5)
+        assert result.J <= evaluator.cost(games) + 1e-9
+        pooled = {(col.aav, col.tail) for col in search.master.columns}
+        for plan in starts:
+            canonical = canonical_routes(instance, plan, [0] * instance.n_aavs, 0.0)
+            for n, route in enumerate(canonical):
+                tail = route[:-1] if route and instance.is_depot(route[-1].node) else route
+                if tail:
+                    assert (n, tuple(tail)) in pooled
+
+
+def test_exact_bp_starts_from_its_hocf_games() -> None:
+    # With greedy's plan (J 32.59) as its only other start, a short search on 8/20 seed 1
+    # ends no worse than 20 HOCF games (20.49; about 0.3 s, inside the tenth of the time
+    # limit the games may take); without the games it cannot.
+    from tsac_bench.model.generator import generate
+
+    instance = generate("8/20", 1)
+    state = PlanningState.static(instance)
+    games = make_allocator("hocf", samples=20).plan(state, seed=0).routes
+    J = CostEvaluator(instance).cost(
+        BranchPriceAllocator(incumbent="greedy", start_games=20, time_limit=8.0)
+        .plan(state, seed=0).routes)
+    assert J <= CostEvaluator(instance).cost(games) + 1e-9

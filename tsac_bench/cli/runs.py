@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 from rich.table import Column, Table
 
+from tsac_bench.batch.runner import DEFAULT_EXACT_TIME_LIMIT, DEFAULT_TIME_LIMIT
 from tsac_bench.batch.worker import GRACE_SECONDS
 from tsac_bench.cli.app import app, console, say_error, user_errors
 from tsac_bench.errors import TsacBenchError
@@ -77,8 +78,9 @@ def run(
     seeds: Annotated[int, typer.Option(min=1, help="seeds 0..N-1 per job")] = 1,
     time_limit: Annotated[float | None, typer.Option(help="solver seconds per plan call (a "
                                                      "dynamic job plans once per event too); "
-                                                     "default per 10 tasks: exact methods 10, "
-                                                     "others 2")] = None,
+                                                     "default per 10 tasks: exact methods "
+                                                     f"{DEFAULT_EXACT_TIME_LIMIT:g}, others "
+                                                     f"{DEFAULT_TIME_LIMIT:g}")] = None,
     budget: Annotated[str | None, typer.Option(
         help="seconds per plan call that every method spends, comma-separated for a sweep "
         "(e.g. 0.1,1,10): one job per budget, an anytime method runs until its budget is "

@@ -240,8 +240,8 @@ def test_default_time_limits_grow_with_the_task_count():
 
     assert default_time_limit("greedy", 4) == 2.0
     assert default_time_limit("greedy", 80) == 16.0
-    assert default_time_limit("exact", 10) == 10.0
-    assert default_time_limit("exact-cpsat", 40) == 40.0
+    assert default_time_limit("exact", 10) == 5.0
+    assert default_time_limit("exact-cpsat", 40) == 20.0
 
 
 def test_method_specs_are_jobs_of_their_own_and_a_store_of_plain_names_resumes(
@@ -315,7 +315,7 @@ def test_jobs_of_a_spec_take_the_modes_and_time_limits_of_its_method(two_instanc
     assert cells == sorted((instance, label, mode, limit)
                            for instance in ("quick-2-4-s1", "quick-2-5-s2")
                            for label, mode, limit in (
-                               ("exact-cpsat:threads=2", "static", 10.0),
+                               ("exact-cpsat:threads=2", "static", 5.0),
                                ("hocf:k_max=3", "static", 2.0),
                                ("hocf:k_max=3", "dynamic", 2.0)))
     for job in jobs:  # the worker builds the method from its name and converted settings

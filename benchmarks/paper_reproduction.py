@@ -230,10 +230,8 @@ def headline_block(table: pd.DataFrame) -> list[str]:
         f"The static sweep ({', '.join(f'{b:g}' for b in sorted(static_budgets))} s, "
         f"{static_instances} instances per scale, 3 seeds): "
         "[reports/paper-reproduction/budgets/index.md](reports/paper-reproduction/budgets/"
-        "index.md). It is not yet at equal computing: it ran two jobs on the machine's two "
-        "cores, and DGA's rows were re-run later on a core of their own, where DGA built 1.2-2 "
-        "times the individuals per call at 3 s (docs/methods.md, \"One job per dedicated "
-        "core\"); the others' re-run so is to come.",
+        "index.md), every job of it, as of the dynamic runs, one at a time on a core of its "
+        "own (docs/methods.md, \"One job per dedicated core\").",
     ]
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from exact_root_bounds import root_bound
 
 from tsac_bench.formulations.branch_price import BranchPrice, BranchPriceOptions
 from tsac_bench.model.io import read_instance
+from tsac_bench.reporting.report import shown_command
 
 ROOT = Path(__file__).resolve().parent.parent
 REGRESSION = ROOT / "instances" / "regression"
@@ -63,7 +65,7 @@ def main(argv: list[str]) -> None:
                + f" | {full['columns']} | {full['seconds']:.1f} |")
         print(row, flush=True)
         lines.append(row)
-    command = "python benchmarks/exact_bp_root.py " + " ".join(argv)
+    command = shown_command(shlex.join(["python", "benchmarks/exact_bp_root.py", *argv]), ROOT)
     args.out.write_text("\n".join([
         "# Root bounds of exact-bp's route master (% of J*)", "", f"Command: `{command}`", "",
         *lines, ""]))

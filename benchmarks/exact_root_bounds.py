@@ -19,6 +19,7 @@ Writes reports/archive/exact-root-bounds.md.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -29,6 +30,7 @@ from tsac_bench.model import Instance
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.generator import generate
 from tsac_bench.planning import PlanningState
+from tsac_bench.reporting.report import shown_command
 from tsac_bench.solvers.greedy import GreedyAllocator
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -140,7 +142,7 @@ def main(argv: list[str]) -> None:
                    + f" | {', '.join(map(str, counts))} | {time.perf_counter() - began:.0f} |")
             print(row, flush=True)
             lines.append(row)
-    command = "python benchmarks/exact_root_bounds.py " + " ".join(argv)
+    command = shown_command(shlex.join(["python", "benchmarks/exact_root_bounds.py", *argv]), ROOT)
     args.out.write_text("\n".join([
         "# Root LP bounds of the MILP", "", f"Command: `{command}`", "",
         "Each column is the LP relaxation of one model: big-M time rows only; with arrival "

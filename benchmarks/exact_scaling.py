@@ -29,6 +29,7 @@ import json
 import math
 import os
 import platform
+import shlex
 import statistics
 import subprocess
 import sys
@@ -38,6 +39,7 @@ from pathlib import Path
 
 from tsac_bench.model.generator import generate
 from tsac_bench.planning.solve import solve
+from tsac_bench.reporting.report import shown_command
 
 ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ("exact", "exact-cpsat", "exact-bp")
@@ -227,7 +229,7 @@ def main(argv: list[str]) -> None:
         rows = run(keys, args.time_limit, args.threads, args.jobs, args.cache)
     small = [size for size in args.sizes if size not in LARGE]
     large = [size for size in args.sizes if size in LARGE]
-    command = "python benchmarks/exact_scaling.py " + " ".join(argv)
+    command = shown_command(shlex.join(["python", "benchmarks/exact_scaling.py", *argv]), ROOT)
     commits = sorted({r.get("commit", "unknown") for r in rows})
     text = [
         "# Exact backends: time to proven optimality and final gap",

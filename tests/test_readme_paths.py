@@ -106,3 +106,22 @@ def test_readme_one_game_table_equals_the_committed_data() -> None:
     assert readme_one_game_table() == expected
     # The caption says 100 instances per scale.
     assert set(stats["count"]) == {100}
+
+
+#: An absolute path of the machine a page was written on (the standard: committed reports and
+#: docs name paths relative to the project).
+MACHINE_PATH = re.compile(r"(?:^|[\s`(\"'=])/(?:tmp|work|root|home|Users|mnt)/")
+COMMITTED_TEXT = [p for p in [*PAGES, *sorted((ROOT / "reports").rglob("*"))]
+                  if p.suffix in (".md", ".tex", ".csv", ".jsonl")
+                  and "latest" not in p.relative_to(ROOT).parts]
+
+
+@pytest.mark.parametrize("page", COMMITTED_TEXT, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_no_committed_page_names_a_path_of_the_machine_it_ran_on(page: Path) -> None:
+    for number, line in enumerate(page.read_text().splitlines(), 1):
+        assert not MACHINE_PATH.search(line), f"{page.name}:{number}: {line[:120]}"
+
+
+def test_the_machine_path_rule_catches_a_report_command() -> None:
+    assert MACHINE_PATH.search("Command: `python x.py --out /tmp/diag/es-new.md`")
+    assert not MACHINE_PATH.search("Command: `python x.py --out reports/exact-scaling.md`")

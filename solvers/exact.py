@@ -187,9 +187,8 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
     #: A method whose plan is a start besides greedy's ("greedy": none besides it).
     incumbent: str = "dga"
     #: HOCF games whose best plan is a start too (0: none), counted in games, not seconds,
-    #: so that the start is the same on any machine: on the 32/80 scaling instances 100
-    #: games (4.5 s) found plans 8-40 % below exact-bp's after 600 s from DGA's plan
-    #: (docs/formulations.md, "Branching and search").
+    #: so that the start is the same on any machine; chosen on validation instances apart
+    #: from paper-mc (docs/formulations.md, "Branching and search").
     start_games: int = 100
 
     def plan(self, state: PlanningState, *, seed: int = 0,

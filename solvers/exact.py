@@ -40,7 +40,6 @@ from tsac_bench.planning import (
 from tsac_bench.planning.budget import TIME_LIMIT
 from tsac_bench.solvers.greedy import GreedyAllocator
 
-
 #: The share of exact-bp's time limit its start games may take at most.
 START_SHARE = 0.1
 
@@ -220,11 +219,10 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
                      threads=self.threads, seed=seed, wall_time=time.perf_counter() - began)
         return _checked(state, evaluator, result.routes, stats)
 
-
     def _starts(self, state: PlanningState, seed: int, limit: float | None) -> list[tuple]:
         """The plans the search starts from: greedy's, the ``incumbent`` method's and the
         best of ``start_games`` HOCF games; the games stop early only where they would take
-        more than a tenth of the time limit."""
+        more than ``START_SHARE`` of the time limit."""
         from tsac_bench.planning import make_allocator
 
         starts = [_greedy(state)]

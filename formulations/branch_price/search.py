@@ -163,15 +163,9 @@ class BranchPrice:
         routes the first columns (the integer master and the dives combine them)."""
         if not starts:
             raise ValueError("exact-bp needs at least one start plan")
-        best = None
-        for plan in starts:
-            routes = self._start_columns(plan)
-            if best is None:
-                best = _Incumbent(self.master.evaluator, routes,
-                                  self.master.evaluator.cost(routes))
-            else:
-                best.offer(routes)
-        return best
+        evaluator = self.master.evaluator
+        best = min((self._start_columns(plan) for plan in starts), key=evaluator.cost)
+        return _Incumbent(evaluator, best, evaluator.cost(best))
 
     def _start_columns(self, plan: Plan) -> Plan:
         """A start plan in canonical form, its routes added as columns, each task closed by

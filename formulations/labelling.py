@@ -109,6 +109,145 @@ def arrival_cut_terms_kernel(pieces, j, theta):
 
 
 @njit(cache=True)
+def _least_early_cost(early_theta, early_penalty, j, latest):
+    """A lower bound on the penalty a visit to j pays at any arrival term up to ``latest``:
+    each positive penalty that even the latest arrival pays, each negative one in full
+    (the penalties fall with the arrival, so the earliest arrival bounds nothing)."""
+    total = 0.0
+    for q in range(early_theta.shape[1]):
+        penalty = early_penalty[j, q]
+        if penalty < 0.0 or latest <= early_theta[j, q]:
+            total += penalty
+    return total
+
+
+@njit(cache=True)
+def _goods_gain(p, c, unit, a_low, a_high):
+    """The least goods term of a visit whose amount is c units (floor(amount / unit) = c)
+    within a_low..a_high at price p per kg: the largest such amount when goods have value,
+    else the least amount."""
+    if p > 0.0:
+        return -p * min(a_high, (c + 1) * unit - 1)
+    return -p * a_low
+
+
+@njit(cache=True)
+def completion_bounds(out_first, arc_head, arc_leg1, arc_leg2, arc_depot, t_start, t_end,
+                      demand, is_delivery, timed, speed, capacity, per_metre, full, horizon,
+                      cover, aav_time, closer, closer_time, goods_time, visit_bonus,
+                      cut_bonus, arc_bonus, forbidden_task, forbidden_arc, amount_low,
+                      amount_high, theta_high, early_theta, early_penalty, pieces, step,
+                      n_steps, unit):
+    """bound[b, i, d, q]: a lower bound on the reduced cost that any completion adds to a
+    label at node i whose clock is at least b * step and whose trip has room for d more
+    units of deliveries and q more units of pickups (a unit is ``unit`` kg, room rounded
+    up; docs/formulations.md, "Completion bounds"). A backward recursion over the time grid
+    that relaxes the rest: tasks may be visited again, each leg pays its least operating
+    cost, each price term is taken at the earliest arrival the grid allows (every term but
+    the arrival windows' penalties is non-decreasing in the arrival; those are bounded by
+    ``_least_early_cost``), and an amount of a kg takes floor(a / unit) units of the room
+    (Eq. 10 keeps a trip's deliveries and its pickups each within B; a depot visit
+    renews both). Stopping adds nothing, so every entry is <= 0. A bucket whose moves
+    within it do not settle in as many passes as there are nodes (a cycle of legs
+    shorter than the step) bounds nothing (-inf)."""
+    n_nodes = out_first.shape[0] - 1
+    units = -(-capacity // unit)
+    bound = np.zeros((n_steps, n_nodes, units + 1, units + 1))
+    for b in range(n_steps - 1, -1, -1):
+        leave = b * step
+        settled = False
+        for _ in range(n_nodes + 1):
+            changed = False
+            for i in range(n_nodes):
+                for a in range(out_first[i], out_first[i + 1]):
+                    j = arc_head[a]
+                    if forbidden_task[j] or forbidden_arc[a]:
+                        continue
+                    last = arc_leg2[a] if arc_depot[a] else arc_leg1[a]
+                    # Shortened by a relative 1e-9: below the float sum of the real legs.
+                    t = leave + (arc_leg1[a] + arc_leg2[a]) / speed * (1.0 - 1e-9)
+                    if t < t_start[j]:
+                        t = t_start[j]
+                    if t > t_end[j]:
+                        continue
+                    c = min(per_metre * last, full) - visit_bonus[j] - arc_bonus[a] \
+                        - cut_bonus[j]
+                    p = cover[j]
+                    if timed[j]:
+                        theta = (t - t_start[j]) / horizon
+                        if theta > theta_high[j]:
+                            continue
+                        latest = min(theta_high[j], (t_end[j] - t_start[j]) / horizon)
+                        c += _least_early_cost(early_theta, early_penalty, j, latest)
+                        c += aav_time[j] * theta
+                        cut_aav, cut_closer, cut_goods = arrival_cut_terms_kernel(pieces, j,
+                                                                                  theta)
+                        c += cut_aav
+                        c += min(0.0, closer_time[j] * theta + cut_closer - closer[j])
+                        p -= goods_time[j] * theta
+                        p -= cut_goods
+                    a_low = amount_low[j]
+                    a_high = min(demand[j], capacity, amount_high[j])
+                    if a_high < a_low:
+                        continue
+                    c_low = a_low // unit
+                    c_high = a_high // unit if p > 0.0 else c_low
+                    later = min(int(t / step), n_steps - 1)
+                    here = bound[later, j]
+                    delivery = is_delivery[j]
+                    if arc_depot[a]:
+                        # A fresh trip: the same value from every room of node i.
+                        value = np.inf
+                        for cu in range(c_low, min(c_high, units) + 1):
+                            rest = here[units - cu, units] if delivery else \
+                                here[units, units - cu]
+                            value = min(value, _goods_gain(p, cu, unit, a_low, a_high) + rest)
+                        value += c
+                        for d in range(units + 1):
+                            for q in range(units + 1):
+                                if value < bound[b, i, d, q]:
+                                    bound[b, i, d, q] = value
+                                    changed = changed or later == b
+                        continue
+                    for d in range(units + 1):
+                        for q in range(units + 1):
+                            room = d if delivery else q
+                            value = np.inf
+                            for cu in range(c_low, min(c_high, room) + 1):
+                                rest = here[d - cu, q] if delivery else here[d, q - cu]
+                                value = min(value,
+                                            _goods_gain(p, cu, unit, a_low, a_high) + rest)
+                            value += c
+                            if value < bound[b, i, d, q]:
+                                bound[b, i, d, q] = value
+                                changed = changed or later == b
+            if not changed:
+                settled = True
+                break
+        if not settled:
+            bound[b] = -np.inf
+    return bound
+
+
+@njit(cache=True)
+def _prices_out(table, bound, unit, capacity):
+    """Whether a label with this table may still lead to a schedule of negative reduced
+    cost by ``bound`` (its node's and clock's completion bounds by room): some cell
+    (peak x, pickup goods y <= x) plus the bound of the room it leaves (B - x for
+    deliveries, B - y for pickups, rounded up to units) is negative. An amount choice
+    with peak p and pickup goods q is in cell (p, q), so no completion of it is missed."""
+    units = bound.shape[0] - 1
+    if table[capacity, capacity] + bound[units, units] >= 0.0:
+        return False  # the most room bounds lowest
+    for x in range(capacity + 1):
+        d = -(-(capacity - x) // unit)
+        for y in range(x + 1):
+            if table[x, y] + bound[d, -(-(capacity - y) // unit)] < 0.0:
+                return True
+    return False
+
+
+@njit(cache=True)
 def _dominates(a, b, clock, cost, loaded, visited, flown, tables, max_range, dcum_monotone,
                penalised, early_theta, early_penalty, t_start, t_end, horizon, reach,
                elementary):
@@ -160,15 +299,20 @@ def label_schedules(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                arc_bonus,
                forbidden_task, forbidden_arc, amount_low, amount_high, theta_high,
                early_theta, early_penalty, penalised, pieces, reach, ng_memory, elementary,
-               label_cap, deadline):
+               label_cap, deadline, completion, step, unit):
     """Every undominated label from the anchor, extended path length by path length (with
     ``label_cap`` > 0 only the cheapest that many per node and length go on).
+
+    A label that cannot lead to a schedule that prices out by ``completion[b, node]``
+    (``completion_bounds``, b its clock's step; ``_prices_out``) is not kept (an empty
+    ``completion`` bounds nothing).
 
     Returns (cost, alive, node, parent, arc, price, low, high, tables), one entry per
     label, the root first (parent -1). Arrival and Dcum are accumulated leg by leg in the
     evaluator's order of float operations, so a label's clock is the evaluator's arrival."""
     size = capacity + 1
     n_nodes = out_first.shape[0] - 1
+    n_steps = completion.shape[0]
     words = anchor_visited.shape[0]
     room = 1024
     node = np.empty(room, np.int64)
@@ -280,6 +424,10 @@ def label_schedules(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                 if not np.isfinite(tables[k, size - 1, size - 1]):
                     continue
                 tables[k] += c
+                if n_steps and not _prices_out(
+                        tables[k], completion[min(int(t / step), n_steps - 1), j], unit,
+                        capacity):
+                    continue
                 node[k], parent[k], arc_of[k], price_of[k] = j, lab, a, p
                 low_of[k], high_of[k] = a_low, a_high
                 clock[k], flown[k], cost[k] = t, f, tables[k, size - 1, size - 1]

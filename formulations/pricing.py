@@ -51,7 +51,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tsac_bench.formulations.labelling import arrival_cut_terms_kernel, label_schedules
+from tsac_bench.formulations.labelling import (
+    arrival_cut_terms_kernel,
+    completion_bounds,
+    label_schedules,
+)
 from tsac_bench.formulations.network import DIRECT, START, AavNetwork
 from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.planning import Anchor
@@ -126,6 +130,11 @@ class PricingAnchor:
     skip_depot_visit: bool
 
 
+#: A trip's room in the completion bounds, in at most this many units per kind of goods:
+#: finer units bound closer and cost the recursion (units + 1) ** 2 states per node.
+COMPLETION_UNITS = 6
+
+
 @dataclass
 class Schedule:
     """A priced schedule: the free visits after the prefix (depot visits included, the
@@ -154,8 +163,9 @@ class Pricer:
     """
 
     def __init__(self, instance: Instance, n: int, network: AavNetwork, anchor: PricingAnchor,
-                 timed: frozenset[int], ng_size: int) -> None:
+                 timed: frozenset[int], ng_size: int, completion_steps: int) -> None:
         self.instance = instance
+        self.completion_steps = completion_steps
         self.n = n
         self.network = network
         self.anchor = anchor
@@ -252,7 +262,8 @@ class Pricer:
         exact least without the exact labelling. Past ``deadline`` (time.perf_counter) the
         labelling stops: the schedules found so far are returned and the least reduced
         cost is -inf (nothing is known of it), or in a later relaxed run the earlier
-        run's least."""
+        run's least. With completion bounds (``completion_steps``; not in heuristic calls)
+        the labels that cannot price out are dropped, and a least >= 0 is reported as 0."""
         n_tasks, size = self.instance.n_tasks, self.capacity + 1
 
         def per_task(values: dict[int, float], fill: float = 0.0, dtype=float) -> np.ndarray:
@@ -295,11 +306,14 @@ class Pricer:
             per_task(prices.visit_bonus),
             per_task(prices.cut_bonus), arc_bonus, forbidden_task, forbidden_arc, low, high,
             theta_high, early_theta, early_penalty, np.array(penalised, np.int64), pieces)
+        # A heuristic call keeps a few labels per node anyway: the bounds cost it more than
+        # they save (8/20 validation root: 11 s for its heuristic calls' bounds, 4 s saved).
+        completion = self._completion_bounds(arrays, heuristic=bool(label_cap))
         best = -math.inf
         chosen: list[Schedule] = []
         for _ in range(1 + (growth_rounds if relaxed else 0)):
             least, found, cycles = self._run(root, arrays, limit, label_cap, relaxed,
-                                             deadline)
+                                             deadline, completion)
             if least == -math.inf:  # cut short: the earlier run's least stands
                 return best, chosen or found
             best, chosen = max(best, least), found
@@ -307,11 +321,38 @@ class Pricer:
                 break
         return best, chosen
 
+    def _completion_bounds(self, arrays: tuple, heuristic: bool
+                           ) -> tuple[np.ndarray, float, int]:
+        """``labelling.completion_bounds`` on a grid of ``completion_steps`` steps up to the
+        last window's end, the step and the unit of room (COMPLETION_UNITS per trip); an
+        empty grid when they are off or for a ``heuristic`` call. The same for every run
+        of one call (the ng memory does not enter it)."""
+        n_nodes = len(self._out_first) - 1
+        unit = -(-self.capacity // COMPLETION_UNITS)
+        ends = self._t_end[np.isfinite(self._t_end)]
+        if heuristic or not self.completion_steps or not len(ends) or ends.max() <= 0.0:
+            return np.zeros((0, n_nodes, 1, 1)), 1.0, unit
+        step = float(ends.max()) / self.completion_steps
+        (cover, aav_time, closer, closer_time, goods_time, visit_bonus, cut_bonus, arc_bonus,
+         forbidden_task, forbidden_arc, low, high, theta_high, early_theta, early_penalty,
+         _, pieces) = arrays
+        bound = completion_bounds(
+            self._out_first, self._arc_head, self._arc_leg1, self._arc_leg2, self._arc_depot,
+            self._t_start, self._t_end, self._demand, self._is_delivery, self._timed,
+            self.speed, self.capacity, self.per_metre, self.full, self.horizon, cover,
+            aav_time, closer, closer_time, goods_time, visit_bonus, cut_bonus, arc_bonus,
+            forbidden_task, forbidden_arc, low, high, theta_high, early_theta, early_penalty,
+            pieces, step, self.completion_steps, unit)
+        return bound, step, unit
+
     def _run(self, root: np.ndarray, arrays: tuple, limit: int, label_cap: int | None,
-             relaxed: bool, deadline: float
+             relaxed: bool, deadline: float, completion: tuple[np.ndarray, float, int]
              ) -> tuple[float, list[Schedule], list[tuple[Visit, ...]]]:
         """One labelling: (least reduced cost, schedules, and in the relaxation the
-        non-elementary paths of negative reduced cost among the first ``limit``)."""
+        non-elementary paths of negative reduced cost among the first ``limit``). With
+        completion bounds the labels that cannot price out are dropped, so only a negative
+        least is exact: the least is reported as min(least, 0), what the Lagrangian bound
+        and the convergence test use."""
         anchor = self.anchor
         labels = label_schedules(
             self._out_first, self._arc_head, self._arc_leg1, self._arc_leg2, self._arc_depot,
@@ -321,10 +362,12 @@ class Pricer:
             self._node(anchor.node), anchor.clock, anchor.flown, self._anchor_visited,
             anchor.loaded, root, *arrays, self._reach,
             self._ng_memory if relaxed else self._full_memory, not relaxed,
-            0 if label_cap is None else label_cap, deadline)
+            0 if label_cap is None else label_cap, deadline, *completion)
         cost, alive, finished = labels[0], labels[1], labels[9]
         self.last_label_count = len(cost)
         least = float(cost.min()) if finished else -math.inf
+        if len(completion[0]):
+            least = min(least, 0.0)
         chosen, seen, cycles = [], set(), []
         for k in np.flatnonzero(alive)[np.argsort(cost[alive], kind="stable")]:
             if cost[k] >= -1e-9 or len(chosen) >= limit:

@@ -148,7 +148,8 @@ class Master:
                               trailing, prefix.last, leaves.time)
         anchor = anchor_of(instance, n, self.committed[n], prefix.trailing_depot,
                            prefix.last, leaves)
-        return Pricer(instance, n, network, anchor, self.timed, self.options.ng_size)
+        return Pricer(instance, n, network, anchor, self.timed, self.options.ng_size,
+                      self.options.completion_steps)
 
     def _task_rows(self, in_prefix: set[int]) -> None:
         """Convexity, coverage, closer, closer time, per-AAV time and goods-time rows."""

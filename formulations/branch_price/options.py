@@ -39,6 +39,8 @@ class BranchPriceOptions:
     heuristic_round_columns: int = _knob(120, Interval(int, 0, None))
     #: ng neighbourhood size: a cheaper relaxed labelling and bound first (0: exact only).
     ng_size: int | None = _knob(None, NoneOr(Interval(int, 0, None)))
+    #: Time steps of the completion bounds that drop labels which cannot price out (0: off).
+    completion_steps: int = _knob(512, Interval(int, 0, None))
     #: Times a call grows the neighbourhoods by its cycles before asking the exact labelling.
     ng_growth_rounds: int = _knob(5, Interval(int, 0, None))
     #: Weight of the last smoothed duals in the heuristic rounds: a degenerate master's

@@ -784,3 +784,50 @@ def test_exact_bp_starts_from_its_hocf_games() -> None:
         BranchPriceAllocator(incumbent="greedy", start_games=20, time_limit=8.0)
         .plan(state, seed=0).routes)
     assert CostEvaluator(instance).cost(games) + 1e-9 >= J
+
+
+def _completion_bound_checks(seed: int) -> tuple[int, int]:
+    """With completion bounds the labelling keeps fewer labels, and what it prices is the
+    same: the least where it is negative (min(least, 0) reported), the same schedules of
+    negative reduced cost (all of them), exact and relaxed, with arrival windows and cuts;
+    with the duals as drawn and shifted so that the least is just below 0, or above it.
+    Returns (cases, cases with fewer labels)."""
+    instance = tiny_instance(seed, n_aavs=2, n_tasks=4, max_demand=6)
+    plain = search_of(instance, ng_size=2, completion_steps=0)
+    bounded = search_of(instance, ng_size=2, completion_steps=32)
+    cases = fewer = 0
+    rng = random.Random(seed)
+    for n, prices, _, windows in _random_pricing_cases(plain, seed):
+        # Arrival cuts too (they price no empty schedule, so the base stands).
+        prices = dataclasses.replace(
+            prices, arrival_cuts=_random_prices(plain, n, rng, arrival_cuts=True).arrival_cuts)
+        drawn, _ = plain.master.pricers[n].price(prices, windows)
+        for shift, relaxed in itertools.product((0.0, -1e-4 - drawn, 1e-3 - drawn),
+                                                (False, True)):
+            shifted = dataclasses.replace(prices, base=prices.base + shift)
+            least, found = plain.master.pricers[n].price(shifted, windows, relaxed=relaxed,
+                                                         limit=10**6)
+            labels = plain.master.pricers[n].last_label_count
+            pruned_least, pruned_found = bounded.master.pricers[n].price(
+                shifted, windows, relaxed=relaxed, limit=10**6)
+            assert pruned_least == pytest.approx(min(least, 0.0), abs=1e-9)
+            assert sorted((s.tail, round(s.reduced_cost, 9)) for s in pruned_found) == \
+                sorted((s.tail, round(s.reduced_cost, 9)) for s in found)
+            cases += 1
+            fewer += bounded.master.pricers[n].last_label_count < labels
+    return cases, fewer
+
+
+def test_completion_bounds_drop_labels_and_price_the_same() -> None:
+    cases, fewer = map(sum, zip(*(_completion_bound_checks(seed) for seed in range(6)),
+                                strict=True))
+    # Dropping labels somewhere, or the check could not tell the bounds from none.
+    assert fewer >= cases // 3, (cases, fewer)
+
+
+def test_completion_bounds_keep_the_root_lp() -> None:
+    instance = tiny_instance(3, n_aavs=3, n_tasks=5, max_demand=6)
+    options = {"arrival_cut_rounds": 0, "heuristic_cap": 0}
+    plain = search_of(instance, completion_steps=0, **options).root()
+    bounded = search_of(instance, completion_steps=64, **options).root()
+    assert bounded["lp"] == pytest.approx(plain["lp"], rel=1e-9)

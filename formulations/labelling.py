@@ -109,6 +109,20 @@ def arrival_cut_terms_kernel(pieces, j, theta):
 
 
 @njit(cache=True)
+def _timed_price(c, p, j, theta, aav_time, closer, closer_time, goods_time, pieces):
+    """A visit to a timed task j at arrival term theta: its cost ``c`` with the time rows',
+    arrival cuts' and closing terms added, and its price per kg ``p`` less the goods-time
+    and goods cut terms (the labelling's order of float operations)."""
+    c += aav_time[j] * theta
+    cut_aav, cut_closer, cut_goods = arrival_cut_terms_kernel(pieces, j, theta)
+    c += cut_aav
+    c += min(0.0, closer_time[j] * theta + cut_closer - closer[j])
+    p -= goods_time[j] * theta
+    p -= cut_goods
+    return c, p
+
+
+@njit(cache=True)
 def _least_early_cost(early_theta, early_penalty, j, latest):
     """A lower bound on the penalty a visit to j pays at any arrival term up to ``latest``:
     each positive penalty that even the latest arrival pays, each negative one in full
@@ -179,13 +193,8 @@ def completion_bounds(out_first, arc_head, arc_leg1, arc_leg2, arc_depot, t_star
                             continue
                         latest = min(theta_high[j], (t_end[j] - t_start[j]) / horizon)
                         c += _least_early_cost(early_theta, early_penalty, j, latest)
-                        c += aav_time[j] * theta
-                        cut_aav, cut_closer, cut_goods = arrival_cut_terms_kernel(pieces, j,
-                                                                                  theta)
-                        c += cut_aav
-                        c += min(0.0, closer_time[j] * theta + cut_closer - closer[j])
-                        p -= goods_time[j] * theta
-                        p -= cut_goods
+                        c, p = _timed_price(c, p, j, theta, aav_time, closer, closer_time,
+                                            goods_time, pieces)
                     a_low = amount_low[j]
                     a_high = min(demand[j], capacity, amount_high[j])
                     if a_high < a_low:
@@ -392,12 +401,8 @@ def label_schedules(out_first, arc_head, arc_leg1, arc_leg2, arc_depot,
                     if theta > theta_high[j]:
                         continue
                     c += _early_cost(early_theta, early_penalty, j, theta)
-                    c += aav_time[j] * theta
-                    cut_aav, cut_closer, cut_goods = arrival_cut_terms_kernel(pieces, j, theta)
-                    c += cut_aav
-                    c += min(0.0, closer_time[j] * theta + cut_closer - closer[j])
-                    p -= goods_time[j] * theta
-                    p -= cut_goods
+                    c, p = _timed_price(c, p, j, theta, aav_time, closer, closer_time,
+                                        goods_time, pieces)
                 a_low = amount_low[j]
                 a_high = min(demand[j], capacity, amount_high[j])
                 # With no value on goods, more than the least amount only uses capacity.

@@ -146,6 +146,17 @@ def _goods_gain(p, c, unit, a_low, a_high):
 
 
 @njit(cache=True)
+def _visit_value(here, d, q, delivery, c_low, c_high, p, unit, a_low, a_high):
+    """The least goods term of a visit plus the completion bound after it (``here``, by
+    room), from room (d, q), over the amounts in units c_low..c_high that the room takes."""
+    value = np.inf
+    for cu in range(c_low, min(c_high, d if delivery else q) + 1):
+        rest = here[d - cu, q] if delivery else here[d, q - cu]
+        value = min(value, _goods_gain(p, cu, unit, a_low, a_high) + rest)
+    return value
+
+
+@njit(cache=True)
 def completion_bounds(out_first, arc_head, arc_leg1, arc_leg2, arc_depot, t_start, t_end,
                       demand, is_delivery, timed, speed, capacity, per_metre, full, horizon,
                       cover, aav_time, closer, closer_time, goods_time, visit_bonus,
@@ -203,30 +214,14 @@ def completion_bounds(out_first, arc_head, arc_leg1, arc_leg2, arc_depot, t_star
                     c_high = a_high // unit if p > 0.0 else c_low
                     later = min(int(t / step), n_steps - 1)
                     here = bound[later, j]
-                    delivery = is_delivery[j]
-                    if arc_depot[a]:
-                        # A fresh trip: the same value from every room of node i.
-                        value = np.inf
-                        for cu in range(c_low, min(c_high, units) + 1):
-                            rest = here[units - cu, units] if delivery else \
-                                here[units, units - cu]
-                            value = min(value, _goods_gain(p, cu, unit, a_low, a_high) + rest)
-                        value += c
-                        for d in range(units + 1):
-                            for q in range(units + 1):
-                                if value < bound[b, i, d, q]:
-                                    bound[b, i, d, q] = value
-                                    changed = changed or later == b
-                        continue
+                    # A depot before j starts a fresh trip: the same value from every room.
+                    fresh = _visit_value(here, units, units, is_delivery[j], c_low, c_high, p,
+                                         unit, a_low, a_high) if arc_depot[a] else 0.0
                     for d in range(units + 1):
                         for q in range(units + 1):
-                            room = d if delivery else q
-                            value = np.inf
-                            for cu in range(c_low, min(c_high, room) + 1):
-                                rest = here[d - cu, q] if delivery else here[d, q - cu]
-                                value = min(value,
-                                            _goods_gain(p, cu, unit, a_low, a_high) + rest)
-                            value += c
+                            value = c + (fresh if arc_depot[a] else _visit_value(
+                                here, d, q, is_delivery[j], c_low, c_high, p, unit, a_low,
+                                a_high))
                             if value < bound[b, i, d, q]:
                                 bound[b, i, d, q] = value
                                 changed = changed or later == b

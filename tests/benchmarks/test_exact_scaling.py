@@ -65,3 +65,33 @@ def test_the_time_split_sums_each_part_over_the_instances_of_a_size() -> None:
     # branching 10, other 10.
     assert exact_scaling.time_split_table(rows, ["4/10"]).splitlines()[2] == \
         "| 4/10 | 40 % | 16 % | 20 % | 2 % | 20 % | 2 % | 20 | 200 |"
+
+
+def test_the_best_known_j_is_the_librarys_where_it_holds_the_same_instance_and_is_lower(
+        tmp_path: Path) -> None:
+    import json
+
+    from tsac_bench.model.generator import generate
+    from tsac_bench.model.io import write_instance
+
+    directory = tmp_path / "3-8"
+    directory.mkdir()
+    write_instance(generate("3/8", 1), directory / "gen-3-8-s1.json")
+    # Named as seed 2's instance but holding seed 1's: not the instance the benchmark solves.
+    write_instance(generate("3/8", 1), directory / "gen-3-8-s2.json")
+    entries = {f"gen-3-8-s{seed}": {"file": f"gen-3-8-s{seed}.json", "J_star": None,
+                                    "lower_bound": None, "status": "feasible", "best_J": J}
+               for seed, J in ((1, 12.5), (2, 1.0))}
+    (directory / "manifest.json").write_text(json.dumps(
+        {"format": "tsac-bench/manifest@1", "instances": entries}))
+    known = exact_scaling.library_best({("3/8", 1), ("3/8", 2), ("3/8", 3)}, tmp_path)
+    assert known == {("3/8", 1): 12.5}
+    rows = [row("3/8", 1, "exact-bp", 16.0, 5.0, 4.0), row("3/8", 2, "exact-bp", 16.0, 5.0,
+                                                             4.0)]
+    # seed 1: the library's 12.5 is below the run's 16 and its start 20; 5/12.5 = 40 %.
+    # Seed 2: the run's own 16 (5/16 = 31.25 %).
+    assert exact_scaling.bound_table(rows, ["3/8"], ("exact-bp",), "lower_bound",
+                                     known).splitlines()[2:] == [
+        "| 3/8 | 1 | 12.500000 | 40.0 % |",
+        "| 3/8 | 2 | 16.000000 | 31.2 % |",
+    ]

@@ -786,6 +786,30 @@ def test_exact_bp_starts_from_its_hocf_games() -> None:
     assert CostEvaluator(instance).cost(games) + 1e-9 >= J
 
 
+def test_exact_bp_starts_from_its_games_run_as_a_dynamic_run_where_tasks_are_released() -> None:
+    # 3/8 seed 4 has two release events. Greedy's plan has J 40.78, DGA's 40.68, the best of
+    # ten HOCF games planning all tasks at once 41.06; the same games run as the dynamic run
+    # runs them (each release plans again around what has been executed), their stamps
+    # removed, 40.37: a start, and the best one. Without the setting, or in a re-planning
+    # state, there is no such start.
+    from tsac_bench.model.generator import generate
+    from tsac_bench.planning.simulator import offline_routes, simulate
+
+    instance = generate("3/8", 4)
+    state = PlanningState.static(instance)
+    evaluator = CostEvaluator(instance)
+    rolling = offline_routes(simulate(instance, make_allocator("hocf", samples=10),
+                                      seed=0).routes)
+    starts = BranchPriceAllocator(start_games=10)._starts(state, 0, None)
+    assert starts[3] == rolling
+    assert [round(evaluator.cost(start), 2) for start in starts] == [40.78, 40.68, 41.06,
+                                                                     40.37]
+    assert len(BranchPriceAllocator(start_games=10, rolling_start=False)
+               ._starts(state, 0, None)) == 3
+    replanning = PlanningState(instance, 1.0, state.visible)
+    assert len(BranchPriceAllocator(start_games=10)._starts(replanning, 0, None)) == 3
+
+
 def _completion_bound_checks(seed: int) -> tuple[int, int]:
     """With completion bounds the labelling keeps fewer labels, and what it prices is the
     same: the least where it is negative (min(least, 0) reported), the same schedules of

@@ -34,19 +34,18 @@ from tsac_bench.batch.manifests import (
 )
 from tsac_bench.batch.store import OK, ResultStore
 from tsac_bench.errors import InputError
-from tsac_bench.model import Instance, Solution, Visit
+from tsac_bench.model import Instance, Solution
 from tsac_bench.model.evaluator import cost_at_least, costs_agree, evaluate
 from tsac_bench.model.io import read_instance, read_solution, write_solution
 from tsac_bench.planning import mip_gap, recorded_claim
+from tsac_bench.planning.simulator import offline_routes
 
 TASK_BOUND = "tasks-on-their-own"
 
 
 def offline_plan(solution: Solution) -> Solution:
     """``solution`` with the dynamic run's stamps removed: an offline plan of no higher J."""
-    return Solution(solution.instance,
-                    tuple(tuple(Visit(v.node, v.amount) for v in route)
-                          for route in solution.routes))
+    return Solution(solution.instance, offline_routes(solution.routes))
 
 
 @dataclass(frozen=True)

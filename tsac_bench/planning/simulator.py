@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from tsac_bench.errors import TsacBenchError
-from tsac_bench.model import Instance, Route
+from tsac_bench.model import Instance, Route, Visit
 from tsac_bench.model.evaluator import CostEvaluator, Evaluation, RouteTrace
 from tsac_bench.planning.allocator import Allocator, PlanningState, PlanResult
 
@@ -152,6 +152,12 @@ class SimulationResult:
     evaluation: Evaluation
     replans: tuple[Replan, ...]
     wall_time: float  # time spent inside the allocator's plan calls
+
+
+def offline_routes(routes: Sequence[Route]) -> tuple[Route, ...]:
+    """``routes`` with the dynamic run's stamps removed: an offline plan of no higher J
+    (docs/model.md, "The dynamic run")."""
+    return tuple(tuple(Visit(v.node, v.amount) for v in route) for route in routes)
 
 
 def release_times(instance: Instance) -> list[float]:

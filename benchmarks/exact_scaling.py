@@ -161,12 +161,14 @@ def library_best(keys: set[tuple[str, int]], sets: Path = PAPER_SETS) -> dict[tu
     holds: ``generate(size, seed)`` is paper-mc's ``gen-N-M-sSEED`` (checked, the meta left
     aside: older files name the generator's module as it was)."""
     known: dict[tuple, float] = {}
+    manifests: dict[str, dict] = {}
     for size, seed in keys:
         folder = size.replace("/", "-")
         directory = sets / folder
-        if not (directory / "manifest.json").exists():
-            continue
-        entry = read_manifest(directory).require_valid().entries.get(f"gen-{folder}-s{seed}")
+        if folder not in manifests:
+            manifests[folder] = (read_manifest(directory).require_valid().entries
+                                 if (directory / "manifest.json").exists() else {})
+        entry = manifests[folder].get(f"gen-{folder}-s{seed}")
         if entry is None or entry.get("best_J") is None:
             continue
         generated = generate(size, seed)

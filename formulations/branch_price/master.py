@@ -531,11 +531,15 @@ class Master:
                             ) -> tuple[Route, ...] | None:
         """A plan from the master with lambda integer over its columns (HiGHS's MIP, at most
         ``master_mip_nodes`` nodes and ``time_limit`` s, pruning at ``cutoff``): it puts
-        together columns that no single LP solution does, or None. Its objective is at
-        least the J of its plan, and equal with the right closing sets. The live LP is left
-        at the root's bounds (each node sets its own)."""
+        together columns that no single LP solution does, or None. Only the
+        ``master_mip_columns`` columns of least reduced cost at the last LP solved take
+        part (and each AAV's empty schedule): over the whole pool HiGHS's MIP finds no
+        good plan in the time it has. Its objective is at least the J of its plan, and
+        equal with the right closing sets. The live LP is left at the root's bounds (each
+        node sets its own)."""
         import highspy
 
+        reduced = self.padded(np.asarray(self.h.getSolution().col_dual))
         self.apply(())
         mip = highspy.Highs()
         mip.setOptionValue("output_flag", False)
@@ -547,6 +551,14 @@ class Master:
         lambdas = np.array([c.index for c in self.columns], np.int32)
         mip.changeColsIntegrality(len(lambdas), lambdas,
                                   np.full(len(lambdas), highspy.HighsVarType.kInteger))
+        keep = self.options.master_mip_columns
+        if keep:
+            empty = {cols[0] for cols in self.columns_of}
+            ranked = sorted((c.index for c in self.columns if c.index not in empty),
+                            key=lambda j: (reduced[j], j))
+            left_out = np.array(ranked[keep:], np.int32)
+            mip.changeColsBounds(len(left_out), left_out, np.zeros(len(left_out)),
+                                 np.zeros(len(left_out)))
         mip.run()
         if not mip.getInfo().primal_solution_status:
             return None

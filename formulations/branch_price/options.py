@@ -77,6 +77,8 @@ class BranchPriceOptions:
     dive_share: float = _knob(0.1, Interval(float, 0, 1, closed="both"))
     #: Node cap of the integer master over the pool (0: off; in time it improved nothing).
     master_mip_nodes: int = _knob(0, Interval(int, 0, None))
+    #: Columns of least reduced cost the integer master takes (0: the whole pool).
+    master_mip_columns: int = _knob(1500, Interval(int, 0, None))
 
     #: What each field admits, as a method's ``setting_constraints``.
     setting_constraints: ClassVar[Any]

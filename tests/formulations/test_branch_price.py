@@ -375,6 +375,27 @@ def test_the_integer_master_is_no_worse_than_any_combination_of_the_lp_support(
     assert CostEvaluator(instance).cost(plan) <= best_point + 1e-9
 
 
+@pytest.mark.parametrize("keep", [1, 3])
+def test_the_integer_master_takes_only_the_columns_of_least_reduced_cost(keep: int) -> None:
+    # Each AAV's route in its plan is its empty schedule or one of the ``keep`` columns of
+    # least reduced cost at the last LP (its own empty schedule aside).
+    import numpy as np
+
+    instance = tiny_instance(403, n_aavs=2, n_tasks=4, max_demand=5)
+    search = search_of(instance, master_mip_nodes=1000, master_mip_columns=keep)
+    assert search.root()["converged"]
+    master = search.master
+    reduced = np.asarray(master.h.getSolution().col_dual)
+    empty = {cols[0] for cols in master.columns_of}
+    ranked = sorted((c for c in master.columns if c.index not in empty),
+                    key=lambda c: (reduced[c.index], c.index))
+    assert len(ranked) > keep
+    allowed = {c.route for c in ranked[:keep]} | {master.column_at[j].route for j in empty}
+    plan = master.integer_master_plan(math.inf, 60.0)
+    assert plan is not None
+    assert all(route in allowed for route in plan)
+
+
 def test_the_root_dive_finds_the_optimum_and_leaves_the_root_lp_as_it_was() -> None:
     # 2 AAVs x 4 tasks: of the 16 instances 500-515, the 11 with a root LP below J* dive to
     # a plan; the dive reaches the brute-force optimum on these six (it is a heuristic:

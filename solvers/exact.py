@@ -147,7 +147,7 @@ class CpSatAllocator(Settings):
         from tsac_bench.formulations.cpsat import solve_cpsat_isolated
         from tsac_bench.formulations.network import canonical_routes
 
-        if any(state.committed) or state.time > 0:
+        if not state.at_start:
             raise TsacBenchError("exact-cpsat solves static planning states only (no "
                                  "committed visits, nothing planned after t = 0); use "
                                  "'exact' in a dynamic run")
@@ -241,8 +241,7 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
             cap = None if limit is None else START_SHARE * limit
             starts.append(games.plan(state, seed=seed, time_limit=cap).routes)
             events = release_times(state.instance)
-            if (self.rolling_start and events and state.time == 0
-                    and not any(state.committed)
+            if (self.rolling_start and events and state.at_start
                     and len(state.visible) == state.instance.n_tasks):
                 per_call = None if cap is None else cap / (1 + len(events))
                 run = simulate(state.instance, games, seed=seed, time_limit=per_call)

@@ -63,6 +63,11 @@ class PlanningState:
         """Every task known at t = 0, nothing committed."""
         return cls(instance, 0.0, frozenset(range(instance.n_tasks)))
 
+    @property
+    def at_start(self) -> bool:
+        """Nothing committed and nothing planned after t = 0: the run has not begun."""
+        return self.time == 0 and not any(self.committed)
+
     def first_free(self, n: int) -> int:
         """Index of AAV n's first visit that the plan may change."""
         return len(self.committed[n])

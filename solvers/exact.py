@@ -13,8 +13,9 @@ amounts of the MILP (a late committed visit keeps its C_time = 1), only visible 
 added. ``exact-cpsat`` solves static states (no committed visits) over the visible tasks and
 refuses others: it is the independent cross-check of the offline optimum. ``exact-bp``
 solves both kinds of state (each AAV's schedule starts at the end of its prefix) and starts
-from the best of the greedy plan, the ``dga`` plan and the best of 100 ``hocf`` games, each
-plan's routes columns of its master.
+from the best of the greedy plan, the ``dga`` plan (2 000 generations from 20 tasks up), the
+best of 100 ``hocf`` games and those games run as a dynamic run, each plan's routes columns
+of its master.
 """
 
 from __future__ import annotations
@@ -40,8 +41,14 @@ from tsac_bench.planning import (
 from tsac_bench.planning.budget import TIME_LIMIT
 from tsac_bench.solvers.greedy import GreedyAllocator
 
-#: The share of exact-bp's time limit its start games may take at most.
+#: The share of exact-bp's time limit its start games may take at most (and, apart, the
+#: incumbent method's run and the games' dynamic run each).
 START_SHARE = 0.1
+#: From this many tasks up exact-bp's incumbent method (DGA) runs INCUMBENT_GENERATIONS
+#: generations, below it its own default: chosen on validation instances apart from
+#: paper-mc (docs/formulations.md, "Branching and search").
+INCUMBENT_FROM_TASKS = 20
+INCUMBENT_GENERATIONS = 2000
 
 
 def _limit(own: float | None, call: float | None) -> float | None:
@@ -178,6 +185,7 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
     setting_constraints: ClassVar[Any] = declare(
         time_limit=NoneOr(Interval(float, 0, None, closed="neither")),
         incumbent=Options("dga", "greedy"),
+        incumbent_generations=NoneOr(Interval(int, 0, None)),
         start_games=Interval(int, 0, None),
         rolling_start=Boolean(),
         **BranchPriceOptions.setting_constraints,
@@ -186,6 +194,12 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
     time_limit: float | None = None
     #: A method whose plan is a start besides greedy's ("greedy": none besides it).
     incumbent: str = "dga"
+    #: Generations of the incumbent method's run (DGA's ``generations``), counted, not
+    #: timed, so that the start is the same on any machine, and capped at START_SHARE of
+    #: the time limit; None: DGA's own default below INCUMBENT_FROM_TASKS tasks and
+    #: INCUMBENT_GENERATIONS from there up, where its longer run gave lower plans than the
+    #: search's time would (docs/formulations.md, "Branching and search").
+    incumbent_generations: int | None = None
     #: HOCF games whose best plan is a start too (0: none), counted in games, not seconds,
     #: so that the start is the same on any machine; chosen on validation instances apart
     #: from paper-mc (docs/formulations.md, "Branching and search").
@@ -225,20 +239,30 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
                      threads=self.threads, seed=seed, wall_time=time.perf_counter() - began)
         return _checked(state, evaluator, result.routes, stats)
 
+    def incumbent_settings(self, n_tasks: int) -> dict[str, Any]:
+        """The incumbent method's settings for a planning state of ``n_tasks`` tasks."""
+        generations = self.incumbent_generations
+        if generations is None and n_tasks >= INCUMBENT_FROM_TASKS:
+            generations = INCUMBENT_GENERATIONS
+        return {} if generations is None else {"generations": generations}
+
     def _starts(self, state: PlanningState, seed: int, limit: float | None) -> list[tuple]:
         """The plans the search starts from: greedy's, the ``incumbent`` method's, the best
         of ``start_games`` HOCF games and, with ``rolling_start``, those games' dynamic run;
-        the games stop early only where they would take more than ``START_SHARE`` of the
-        time limit (the dynamic run's plan calls share another such share)."""
+        the incumbent method and the games stop early only where they would take more than
+        ``START_SHARE`` of the time limit each (the dynamic run's plan calls share another
+        such share)."""
         from tsac_bench.planning import make_allocator
         from tsac_bench.planning.simulator import offline_routes, release_times, simulate
 
         starts = [_greedy(state)]
+        cap = None if limit is None else START_SHARE * limit
         if self.incumbent != "greedy":
-            starts.append(make_allocator(self.incumbent).plan(state, seed=seed).routes)
+            incumbent = make_allocator(self.incumbent,
+                                       **self.incumbent_settings(len(state.visible)))
+            starts.append(incumbent.plan(state, seed=seed, time_limit=cap).routes)
         if self.start_games:
             games = make_allocator("hocf", samples=self.start_games)
-            cap = None if limit is None else START_SHARE * limit
             starts.append(games.plan(state, seed=seed, time_limit=cap).routes)
             events = release_times(state.instance)
             if (self.rolling_start and events and state.at_start

@@ -831,6 +831,29 @@ def test_exact_bp_starts_from_its_games_run_as_a_dynamic_run_where_tasks_are_rel
     assert len(BranchPriceAllocator(start_games=10)._starts(replanning, 0, None)) == 3
 
 
+def test_exact_bp_runs_its_incumbent_method_for_the_generations_set() -> None:
+    # 3/8 seed 4: DGA's own 25 generations give 40.68, 80 give 39.51; exact-bp's DGA start
+    # is the latter with incumbent_generations=80. Unset, DGA keeps its own default below
+    # 20 tasks and runs INCUMBENT_GENERATIONS from there up.
+    from tsac_bench.model.generator import generate
+    from tsac_bench.solvers.exact import INCUMBENT_FROM_TASKS, INCUMBENT_GENERATIONS
+
+    instance = generate("3/8", 4)
+    state = PlanningState.static(instance)
+    evaluator = CostEvaluator(instance)
+    starts = BranchPriceAllocator(start_games=0, incumbent_generations=80)._starts(state, 0,
+                                                                                 None)
+    assert starts[1] == make_allocator("dga", generations=80).plan(state, seed=0).routes
+    assert round(evaluator.cost(starts[1]), 2) == 39.51
+    assert round(evaluator.cost(make_allocator("dga").plan(state, seed=0).routes), 2) == 40.68
+    default = BranchPriceAllocator()
+    assert default.incumbent_settings(INCUMBENT_FROM_TASKS - 1) == {}
+    assert default.incumbent_settings(INCUMBENT_FROM_TASKS) == {
+        "generations": INCUMBENT_GENERATIONS}
+    assert BranchPriceAllocator(incumbent_generations=5).incumbent_settings(80) == {
+        "generations": 5}
+
+
 def _completion_bound_checks(seed: int) -> tuple[int, int]:
     """With completion bounds the labelling keeps fewer labels, and what it prices is the
     same: the least where it is negative (min(least, 0) reported), the same schedules of

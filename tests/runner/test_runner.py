@@ -133,6 +133,35 @@ def test_an_unknown_method_is_one_line_and_runs_nothing(tmp_path, two_instances,
         run_batch(RunConfig([two_instances], tmp_path / "x", methods=["nope"]))
 
 
+def test_a_seed_range_adds_seeds_to_a_run_without_running_its_seeds_again(tmp_path,
+                                                                           two_instances, cli):
+    out = tmp_path / "run"
+    run_batch(RunConfig([two_instances], out, methods=["greedy"], mode="static", seeds=2,
+                        jobs=1), note=lambda line: None, progress=False)
+    result = cli("run", two_instances, "--methods", "greedy", "--mode", "static",
+                 "--seeds", "1-3", "--no-report", "--no-progress", "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert "4 job(s) run, 2 already recorded, 0 failed" in result.stdout.replace("\n", " ")
+    seeds = sorted((r["instance"], r["seed"]) for r in rows_by_key(out).values())
+    assert seeds == [(name, seed) for name in ("quick-2-4-s1", "quick-2-5-s2")
+                     for seed in range(4)]
+
+
+@pytest.mark.parametrize(("seeds", "message"), [
+    ("3-1", "error: --seeds: '3-1' names no seed"),
+    ("0", "error: --seeds: '0' names no seed"),
+    ("two", "error: --seeds: 'two' is neither a count nor a range FIRST-LAST"),
+])
+def test_a_bad_seed_count_or_range_is_one_line_and_runs_nothing(tmp_path, two_instances, cli,
+                                                                seeds, message):
+    result = cli("run", two_instances, "--methods", "greedy", "--seeds", seeds,
+                 "--out", tmp_path / "run")
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(message), result.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_an_unknown_mode_is_a_recorded_error(two_instances):
     instance = read_instance(two_instances / "quick-2-4-s1.json")
     from tsac_bench.model.io import instance_to_dict
@@ -193,7 +222,7 @@ def test_a_jobs_spec_and_row_share_its_identity_and_the_row_is_the_stores_column
     assert JobRow.__required_keys__ | JobRow.__optional_keys__ == set(COLUMNS)
     loaded, _ = load_instances([two_instances / "quick-2-4-s1.json"])
     methods, _ = resolve_methods(["hocf:k_max=3"])
-    job = plan_jobs(loaded, methods, ["static"], 1, None, budgets=[0.5])[0]
+    job = plan_jobs(loaded, methods, ["static"], [0], None, budgets=[0.5])[0]
     identity = JobIdentity.__required_keys__ | JobIdentity.__optional_keys__
     assert {key: job.spec[key] for key in identity} == {key: job.row[key] for key in identity}
     assert {key: job.row[key] for key in identity} == {
@@ -309,7 +338,7 @@ def test_jobs_of_a_spec_take_the_modes_and_time_limits_of_its_method(two_instanc
 
     loaded, _ = load_instances([two_instances])
     methods, _ = resolve_methods(["exact-cpsat:threads=2", "hocf:k_max=3", "hocf:k_max=03"])
-    jobs = plan_jobs(loaded, methods, ["static", "dynamic"], 1, None)
+    jobs = plan_jobs(loaded, methods, ["static", "dynamic"], [0], None)
     cells = sorted((j.row["instance"], j.row["method"], j.row["mode"], j.row["time_limit"])
                    for j in jobs)
     assert cells == sorted((instance, label, mode, limit)

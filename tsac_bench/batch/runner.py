@@ -171,7 +171,7 @@ def resolve_modes(mode: str) -> list[str]:
 
 
 def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec],
-              modes: Sequence[str], seeds: int, time_limit: float | None,
+              modes: Sequence[str], seeds: Sequence[int], time_limit: float | None,
               grace: float = GRACE_SECONDS,
               budgets: Sequence[float] | None = None) -> list[Job]:
     """One job per (instance, method spec, mode, seed, budget). A job's ``method`` in the
@@ -188,7 +188,7 @@ def plan_jobs(instances: Iterable[LoadedInstance], methods: Sequence[MethodSpec]
             modes_of_method = supported_modes(allocator_class(method.name))
             # A method that plans only some modes gets no job in the others (not a failure).
             for mode, seed, budget in itertools.product(
-                    [m for m in modes if m in modes_of_method], range(seeds),
+                    [m for m in modes if m in modes_of_method], seeds,
                     budgets or [None, *set_budgets(loaded, method)]):
                 identity = JobIdentity(
                     key=job_key(instance.name, method.label, mode, seed, budget),
@@ -265,7 +265,7 @@ class RunConfig:
     out: Path
     methods: list[str] | None = None
     mode: str = "auto"
-    seeds: int = 1
+    seeds: int | Sequence[int] = 1  # a count n is seeds 0..n-1
     time_limit: float | None = None
     budgets: list[float] | None = None
     jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
@@ -290,8 +290,9 @@ def execute(config: RunConfig, specs: list[JobSpec]) -> Iterator[tuple[JobSpec, 
 def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
               progress: bool = True) -> BatchOutcome:
     """Run every job of ``config`` not yet recorded in ``config.out``."""
-    if config.seeds < 1:
-        raise TsacBenchError("--seeds: must be at least 1")
+    seeds = range(config.seeds) if isinstance(config.seeds, int) else list(config.seeds)
+    if not seeds or min(seeds) < 0:
+        raise TsacBenchError("--seeds: must name at least one seed, none negative")
     if config.time_limit is not None and config.time_limit <= 0:
         raise TsacBenchError("--time-limit: must be positive")
     if config.budgets is not None:
@@ -317,7 +318,7 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
                    for path in config.paths for sweep in sweep_sets_below(path)]
     for line in [*method_notes, *sweep_notes, *problems]:
         note(line)
-    jobs = plan_jobs(loaded, methods, modes, config.seeds, config.time_limit,
+    jobs = plan_jobs(loaded, methods, modes, seeds, config.time_limit,
                      config.grace, config.budgets)
     outcome.total = len(jobs)
     with ResultStore(config.out) as store:
@@ -328,7 +329,7 @@ def run_batch(config: RunConfig, *, note: Callable[[str], None] = print,
             record_calibration(store, note)
         store.set_meta({"command": shlex.join(sys.argv),
                         "methods": [method.label for method in methods], "modes": modes,
-                        "seeds": config.seeds, "paths": [str(p) for p in config.paths],
+                        "seeds": list(seeds), "paths": [str(p) for p in config.paths],
                         "last_started": datetime.now(UTC).isoformat(timespec="seconds")})
         if outcome.skipped:
             note(f"resuming {config.out}: {outcome.skipped} of {len(jobs)} jobs already "

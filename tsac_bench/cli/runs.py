@@ -31,6 +31,21 @@ def parse_budgets(text: str) -> list[float]:
     return sorted(set(budgets))
 
 
+def parse_seeds(text: str) -> range:
+    """``--seeds 5`` is seeds 0..4; ``--seeds 5-9`` seeds 5..9, so that a run can be given
+    more seeds without running the ones it has again."""
+    first, dash, last = text.partition("-")
+    try:
+        seeds = range(int(first), int(last) + 1) if dash else range(int(text))
+    except ValueError:
+        raise TsacBenchError(f"--seeds: {text!r} is neither a count nor a range FIRST-LAST "
+                             "(e.g. --seeds 5 or --seeds 5-9)") from None
+    if not seeds or seeds.start < 0:
+        raise TsacBenchError(f"--seeds: {text!r} names no seed (a count >= 1, or FIRST-LAST "
+                             "with 0 <= FIRST <= LAST)")
+    return seeds
+
+
 
 @app.command()
 @user_errors
@@ -75,7 +90,9 @@ def run(
                                                 "method)")] = None,
     mode: Annotated[str, typer.Option(help="static, dynamic, both, or auto (static, plus "
                                       "dynamic where supported)")] = "auto",
-    seeds: Annotated[int, typer.Option(min=1, help="seeds 0..N-1 per job")] = 1,
+    seeds: Annotated[str, typer.Option(help="N: seeds 0..N-1 per job; FIRST-LAST: those "
+                                       "seeds (e.g. 5-9 adds five to a run of --seeds 5)")]
+    = "1",
     time_limit: Annotated[float | None, typer.Option(help="solver seconds per plan call (a "
                                                      "dynamic job plans once per event too); "
                                                      "default per 10 tasks: exact methods "
@@ -108,7 +125,7 @@ def run(
     from tsac_bench.batch.runner import RunConfig, run_batch
 
     config = RunConfig(
-        paths=list(paths), out=out, seeds=seeds, time_limit=time_limit, mode=mode,
+        paths=list(paths), out=out, seeds=parse_seeds(seeds), time_limit=time_limit, mode=mode,
         budgets=None if budget is None else parse_budgets(budget),
         methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
         jobs=jobs or os.cpu_count() or 1, executor=executor, scheduler=scheduler,

@@ -20,7 +20,7 @@ run's better plans and bounds in; ``check`` re-evaluates every stored plan.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -215,6 +215,47 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
             write_manifest(s.manifest)
     if skipped:
         note(f"{skipped} job(s) of instances in none of the sets were left out")
+    return changes
+
+
+def recombine(directory: Path, run_dirs: Sequence[Path], time_limit: float,
+              only: Sequence[str] | None = None) -> list[Change]:
+    """Each instance of ``directory`` that the runs planned gets the plan of least J over
+    the routes of all their plans of it and of its best-known plan
+    (``formulations/branch_price/recombine.py``, ``time_limit`` seconds of MIP each), where
+    that is lower than its best-known J. ``only``: those instances."""
+    from tsac_bench.formulations.branch_price.recombine import recombined_plan
+
+    target = _Set(directory)
+    unknown = sorted(set(only or ()) - set(target.instances))
+    if unknown:
+        raise InputError(str(directory), "--only", f"no instance named {unknown[0]!r} here")
+    files: dict[str, list[Path]] = {}
+    for run_dir in run_dirs:
+        with ResultStore(run_dir, create=False) as store:
+            for row in store.rows():
+                name = row["instance"]
+                if row["status"] == OK and row.get("solution_file") and \
+                        name in target.instances and (not only or name in only):
+                    files.setdefault(name, []).append(run_dir / row["solution_file"])
+    found_by = {"method": "recombine", "runs": [r.name for r in run_dirs],
+                "time_limit": time_limit}
+    changes = []
+    for name, paths in sorted(files.items()):
+        instance = read_instance(target.instances[name])
+        entry = target.entry(name)
+        solutions = [offline_plan(read_solution(path, instance)) for path in paths]
+        if entry.get("best_plan"):
+            solutions.append(read_solution(directory / entry["best_plan"], instance))
+        routes = recombined_plan(instance, [s.routes for s in solutions], time_limit)
+        before = entry.get("best_J") if entry.get("best_plan") else None
+        if routes is not None and take_plan(
+                entry, directory, instance, Solution(name, routes),
+                {**found_by, "plans": len(solutions)}, f"recombining {name}"):
+            changes.append(Change(name, "plan", before, entry["best_J"], "recombine"))
+            target.changed = True
+    if target.changed:
+        write_manifest(target.manifest)
     return changes
 
 

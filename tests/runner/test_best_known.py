@@ -198,3 +198,14 @@ def test_recombining_a_runs_plans_lowers_the_best_known_plan(tmp_path):
     unknown = invoke("bks", "recombine", directory, run, "--only", "nope")
     assert unknown.exit_code == 2 and unknown.output.strip().splitlines() == [
         f"error: {directory}: --only: no instance named 'nope' here"]
+    # The same plans as solution files (say, a set's earlier best-known plans) do as well.
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    shutil.copy(directory / "gen-4-10-s4.json", fresh)
+    plans = sorted((run / "solutions").rglob("*.json"))
+    assert len(plans) == 6  # greedy and DGA, three seeds each
+    result = invoke("bks", "recombine", fresh, *plans)
+    assert "gen-4-10-s4: plan none -> 12.338687 (recombined)" in result.output, result.output
+    not_a_plan = invoke("bks", "recombine", fresh, fresh / "gen-4-10-s4.json")
+    assert not_a_plan.exit_code == 2 and not_a_plan.output.strip().splitlines() == [
+        f"error: {fresh / 'gen-4-10-s4.json'}: format: expected 'tsac-bench/solution@1'"]

@@ -36,7 +36,12 @@ from tsac_bench.batch.store import OK, ResultStore
 from tsac_bench.errors import InputError
 from tsac_bench.model import Instance, Solution
 from tsac_bench.model.evaluator import cost_at_least, costs_agree, evaluate
-from tsac_bench.model.io import read_instance, read_solution, write_solution
+from tsac_bench.model.io import (
+    read_instance,
+    read_solution,
+    solution_instance_name,
+    write_solution,
+)
 from tsac_bench.planning import mip_gap, recorded_claim
 from tsac_bench.planning.simulator import offline_routes
 
@@ -218,9 +223,10 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
     return changes
 
 
-def recombine(directory: Path, run_dirs: Sequence[Path], time_limit: float,
+def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
               only: Sequence[str] | None = None) -> list[Change]:
-    """Each instance of ``directory`` that the runs planned gets the plan of least J over
+    """Each instance of ``directory`` that the sources planned (run directories, or
+    solution files such as a set's earlier best-known plans) gets the plan of least J over
     the routes of all their plans of it and of its best-known plan
     (``formulations/branch_price/recombine.py``, ``time_limit`` seconds of MIP each), where
     that is lower than its best-known J. ``only``: those instances."""
@@ -231,14 +237,19 @@ def recombine(directory: Path, run_dirs: Sequence[Path], time_limit: float,
     if unknown:
         raise InputError(str(directory), "--only", f"no instance named {unknown[0]!r} here")
     files: dict[str, list[Path]] = {}
-    for run_dir in run_dirs:
-        with ResultStore(run_dir, create=False) as store:
+    for source in sources:
+        if source.is_file():
+            name = solution_instance_name(source)
+            if name in target.instances and (not only or name in only):
+                files.setdefault(name, []).append(source)
+            continue
+        with ResultStore(source, create=False) as store:
             for row in store.rows():
                 name = row["instance"]
                 if row["status"] == OK and row.get("solution_file") and \
                         name in target.instances and (not only or name in only):
-                    files.setdefault(name, []).append(run_dir / row["solution_file"])
-    found_by = {"method": "recombine", "runs": [r.name for r in run_dirs],
+                    files.setdefault(name, []).append(source / row["solution_file"])
+    found_by = {"method": "recombine", "runs": [source.name for source in sources],
                 "time_limit": time_limit}
     changes = []
     for name, paths in sorted(files.items()):

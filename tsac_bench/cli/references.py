@@ -92,17 +92,18 @@ def bks_update(
 @user_errors
 def bks_recombine(
     directory: Annotated[Path, typer.Argument(metavar="DIR")],
-    run_dirs: Annotated[list[Path], typer.Argument(metavar="RUN_DIR...")],
+    sources: Annotated[list[Path], typer.Argument(
+        metavar="SOURCE...", help="run directories or solution files")],
     time_limit: Annotated[float, typer.Option(min=0.01, help="seconds of MIP per "
                                               "instance")] = 60.0,
     only: Annotated[list[str] | None, typer.Option(help="instance name(s) to recombine")]
     = None,
 ) -> None:
-    """Put together, per instance of DIR, the best plan over the routes of the runs' plans
-    and of its best-known plan; keep it where it is lower."""
+    """Put together, per instance of DIR, the best plan over the routes of the sources'
+    plans and of its best-known plan; keep it where it is lower."""
     from tsac_bench.batch import best_known
 
-    changes = best_known.recombine(directory, run_dirs, time_limit, only)
+    changes = best_known.recombine(directory, sources, time_limit, only)
     for c in changes:
         was = "none" if c.before is None else f"{c.before:.6f}"
         console.print(f"{c.instance}: plan {was} -> {c.after:.6f} (recombined)")

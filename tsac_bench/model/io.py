@@ -244,6 +244,17 @@ def solution_to_dict(solution: Solution, instance: Instance) -> dict[str, Any]:
             "cost": solution.cost, "meta": dict(solution.meta)}
 
 
+def solution_instance_name(path: str | os.PathLike[str]) -> str:
+    """The name of the instance a solution file is for (before the instance is read)."""
+    data = _load_json(path)
+    if not isinstance(data, dict) or data.get("format") != SOLUTION_FORMAT:
+        raise InputError(str(path), "format", f"expected {SOLUTION_FORMAT!r}")
+    name = data.get("instance")
+    if not isinstance(name, str):
+        raise InputError(str(path), "instance", "expected the instance's name")
+    return name
+
+
 def read_solution(path: str | os.PathLike[str], instance: Instance) -> Solution:
     return solution_from_dict(_load_json(path), instance, str(path))
 

@@ -492,6 +492,13 @@ def schedule_route(instance: Instance, prefix: Route, tail: Sequence[Visit]) -> 
     return tuple(route)
 
 
+def schedule_tail(instance: Instance, route: Route, first_free: int = 0) -> tuple[Visit, ...]:
+    """The free visits of a whole route (``schedule_route``'s ``tail``): the visits from
+    ``first_free`` on, without the closing depot."""
+    tail = tuple(route[first_free:])
+    return tail[:-1] if tail and instance.is_depot(tail[-1].node) else tail
+
+
 def all_schedules(pricer: Pricer, restrictions: Restrictions | None = None
                   ) -> list[tuple[Visit, ...]]:
     """Every schedule the labelling could build, without dominance (for the tests' check

@@ -11,7 +11,8 @@ import numpy as np
 
 from tsac_bench.formulations.branch_price.master import Master
 from tsac_bench.formulations.branch_price.options import BranchPriceOptions
-from tsac_bench.formulations.network import canonical_routes, identical_groups
+from tsac_bench.formulations.network import canonical_routes
+from tsac_bench.formulations.pricing import schedule_tail
 from tsac_bench.model import Instance, Route
 
 Plan = tuple[Route, ...]
@@ -35,11 +36,6 @@ def recombined_plan(instance: Instance, plans: Sequence[Plan], time_limit: float
     import highspy
 
     master = Master(instance, None, None, 0.0, RECOMBINATION_OPTIONS)
-    twins = {n: [n] for n in range(instance.n_aavs)}
-    for group in identical_groups(instance, ()):
-        for n in group:
-            twins[n] = group
-    start = []  # the best plan's columns: the MIP's start, so it ends no worse
     # Each plan as given and in canonical form: the canonical form takes the goods a plan
     # over-delivers off some of its routes, which may be the very routes that a better
     # plan needs whole.
@@ -48,13 +44,13 @@ def recombined_plan(instance: Instance, plans: Sequence[Plan], time_limit: float
     for given, canonical in by_cost:
         for plan in (canonical, given):
             for n, route in enumerate(plan):
-                tail = tuple(route[:-1] if route and instance.is_depot(route[-1].node)
-                             else route)
-                for k in twins[n]:
-                    if tail:
+                tail = schedule_tail(instance, route)
+                if tail:
+                    for k in master.identical.get(n, (n,)):
                         master.add_column(k, tail, frozenset())
-                if len(start) < instance.n_aavs:
-                    start.append(master.by_key[n, tail, frozenset()].index)
+    # The best plan's columns start the MIP, so that it ends no worse.
+    start = [master.by_key[n, schedule_tail(instance, route), frozenset()].index
+             for n, route in enumerate(by_cost[0][1])]
     mip = highspy.Highs()
     mip.setOptionValue("output_flag", False)
     mip.setOptionValue("threads", master.options.threads)

@@ -23,6 +23,7 @@ from tsac_bench.formulations.branch_price.columns import BranchDecision, Kind, S
 from tsac_bench.formulations.branch_price.master import INTEGRALITY, Master
 from tsac_bench.formulations.branch_price.options import BranchPriceOptions
 from tsac_bench.formulations.network import canonical_routes
+from tsac_bench.formulations.pricing import schedule_tail
 from tsac_bench.model import Instance, Route
 
 #: The integer master (``master_mip_nodes`` > 0) runs at the root and then whenever the
@@ -178,9 +179,7 @@ class BranchPrice:
             for m, c in trace.contributions:
                 latest[m] = max(latest.get(m, (-math.inf, -1)), (c.arrival, trace.aav))
         for n, route in enumerate(routes):
-            tail = tuple(route[free[n]:])
-            if tail and master.instance.is_depot(tail[-1].node):
-                tail = tail[:-1]
+            tail = schedule_tail(master.instance, route, free[n])
             if tail:
                 master.add_column(n, tail, frozenset(m for m, (_, k) in latest.items()
                                                      if k == n))

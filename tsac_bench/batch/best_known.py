@@ -236,19 +236,19 @@ def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
     unknown = sorted(set(only or ()) - set(target.instances))
     if unknown:
         raise InputError(str(directory), "--only", f"no instance named {unknown[0]!r} here")
+    wanted = set(only or target.instances)
     files: dict[str, list[Path]] = {}
     for source in sources:
         if source.is_file():
-            name = solution_instance_name(source)
-            if name in target.instances and (not only or name in only):
-                files.setdefault(name, []).append(source)
-            continue
-        with ResultStore(source, create=False) as store:
-            for row in store.rows():
-                name = row["instance"]
-                if row["status"] == OK and row.get("solution_file") and \
-                        name in target.instances and (not only or name in only):
-                    files.setdefault(name, []).append(source / row["solution_file"])
+            planned = [(solution_instance_name(source), source)]
+        else:
+            with ResultStore(source, create=False) as store:
+                planned = [(row["instance"], source / row["solution_file"])
+                           for row in store.rows()
+                           if row["status"] == OK and row.get("solution_file")]
+        for name, path in planned:
+            if name in wanted:
+                files.setdefault(name, []).append(path)
     found_by = {"method": "recombine", "runs": [source.name for source in sources],
                 "time_limit": time_limit}
     changes = []

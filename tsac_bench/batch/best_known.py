@@ -328,15 +328,18 @@ def check(directory: Path) -> list[PlanCheck]:
 
 
 def table(directory: Path) -> list[dict[str, Any]]:
-    """The manifest's best-known entries as rows (instance, J, bound, gap, proved, by): what
-    ``tsac-bench bks show`` prints."""
+    """The manifest's best-known entries as rows (instance, J, bound, gap, proved, who found
+    the plan and proved the bound, and in which run directory): what ``tsac-bench bks show``
+    prints."""
     manifest = read_manifest(directory).require_valid()
     rows = []
     for name, entry in sorted(manifest.entries.items()):
         best, bound = entry.get("best_J"), entry.get("lower_bound")
         by = {key: _describe(entry[key]) if entry.get(key) else None
               for key in ("found_by", "bound_by")}
+        runs = {f"{key}_in": (entry.get(f"{key}_by") or {}).get("run")
+                for key in ("found", "bound")}
         rows.append({"instance": name, "best_J": best, "lower_bound": bound,
                      "gap": None if best is None or bound is None else mip_gap(best, bound),
-                     "proved": entry.get("status") == "optimal", **by})
+                     "proved": entry.get("status") == "optimal", **by, **runs})
     return rows

@@ -17,6 +17,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+from generated_pages import sync
+
 from tsac_bench.batch import best_known
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -117,16 +119,8 @@ def main(argv: list[str]) -> int:
                         help="change nothing; exit 1 if the page or table differs")
     args = parser.parse_args(argv)
     rows = entries()
-    stale = []
-    for path, text in ((PAGE, page_text(rows)), (TABLE, csv_text(rows))):
-        if not path.exists() or path.read_text() != text:
-            stale.append(path.name)
-            if not args.check:
-                path.write_text(text)
-    verb = "differ from the manifests" if args.check else "written"
-    print(f"{verb}: {', '.join(stale)}" if stale else "the page is the manifests'")
-    return 1 if stale and args.check else 0
-
+    return sync(((PAGE, page_text(rows)), (TABLE, csv_text(rows))), args.check,
+                "the manifests")
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

@@ -18,6 +18,8 @@ import re
 import sys
 from pathlib import Path
 
+from generated_pages import sync
+
 from tsac_bench.planning import allocator_class
 from tsac_bench.planning.settings import settings_table
 
@@ -68,18 +70,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--check", action="store_true",
                         help="change nothing; exit 1 if a table differs from the code")
     args = parser.parse_args(argv)
-    stale = []
-    for page in sorted(DOCS.glob("*.md")):
-        text = page.read_text()
-        new = rewrite(text)
-        if new != text:
-            stale.append(page.name)
-            if not args.check:
-                page.write_text(new)
-    verb = "differ from the code" if args.check else "rewritten"
-    print(f"{verb}: {', '.join(stale)}" if stale else "every settings table is the code's")
-    return 1 if stale and args.check else 0
-
+    pages = sorted(DOCS.glob("*.md"))
+    return sync(((page, rewrite(page.read_text())) for page in pages), args.check, "the code")
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

@@ -32,22 +32,12 @@ COLUMNS = ("set", "instance", "best_J", "lower_bound", "gap", "proved", "bound_k
 FINDERS_SHOWN = 4
 
 
-def bound_kind(row: dict) -> str:
-    """Where an entry's bound stands: proved, a search's bound, or only the bound that needs
-    no search (formulations/task_bound.py)."""
-    if row["proved"]:
-        return "proved"
-    if row["lower_bound"] is None:
-        return "none"
-    return "tasks-on-their-own" if row["bound_by"] == best_known.TASK_BOUND else "search"
-
-
 def entries() -> list[dict]:
     """Every entry of every set, a row per instance."""
     rows = []
     for name in SETS:
         for row in best_known.table(ROOT / "instances" / name):
-            rows.append({"set": name, **row, "bound_kind": bound_kind(row)})
+            rows.append({"set": name, **row})
     return rows
 
 
@@ -103,7 +93,7 @@ def page_text(rows: list[dict], sets: tuple[str, ...] = SETS) -> str:
         mine = [row for row in rows if row["set"] == name]
         kinds = Counter(row["bound_kind"] for row in mine)
         search = [row for row in mine if row["bound_kind"] == "search"]
-        alone = [row for row in mine if row["bound_kind"] == "tasks-on-their-own"]
+        alone = [row for row in mine if row["bound_kind"] == best_known.TASK_BOUND]
         lines.append(
             f"| {name} | {len(mine)} | {kinds['proved']} | {len(search)}: {_shares(search)} | "
             f"{len(alone)}: {_shares(alone)} | {_finders(mine)} |")

@@ -73,5 +73,6 @@ def main(argv: list[str]) -> int:
     pages = sorted(DOCS.glob("*.md"))
     return sync(((page, rewrite(page.read_text())) for page in pages), args.check, "the code")
 
+
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

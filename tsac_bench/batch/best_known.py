@@ -327,19 +327,32 @@ def check(directory: Path) -> list[PlanCheck]:
     return checks
 
 
+def bound_kind(entry: dict[str, Any]) -> str:
+    """Where an entry's bound stands: ``proved``, a ``search``'s bound (an exact method's
+    after its time limit), only the bound that needs no search (``tasks-on-their-own``), or
+    ``none``."""
+    if entry.get("status") == "optimal":
+        return "proved"
+    if entry.get("lower_bound") is None:
+        return "none"
+    return TASK_BOUND if (entry.get("bound_by") or {}).get("method") == TASK_BOUND \
+        else "search"
+
+
 def table(directory: Path) -> list[dict[str, Any]]:
-    """The manifest's best-known entries as rows (instance, J, bound, gap, proved, who found
-    the plan and proved the bound, and in which run directory): what ``tsac-bench bks show``
-    prints."""
+    """The manifest's best-known entries as rows (instance, J, bound, gap, proved, the kind
+    of bound, who found the plan and proved the bound, and in which run directory): what
+    ``tsac-bench bks show`` prints."""
     manifest = read_manifest(directory).require_valid()
     rows = []
     for name, entry in sorted(manifest.entries.items()):
         best, bound = entry.get("best_J"), entry.get("lower_bound")
-        by = {key: _describe(entry[key]) if entry.get(key) else None
-              for key in ("found_by", "bound_by")}
-        runs = {f"{key}_in": (entry.get(f"{key}_by") or {}).get("run")
-                for key in ("found", "bound")}
-        rows.append({"instance": name, "best_J": best, "lower_bound": bound,
-                     "gap": None if best is None or bound is None else mip_gap(best, bound),
-                     "proved": entry.get("status") == "optimal", **by, **runs})
+        row = {"instance": name, "best_J": best, "lower_bound": bound,
+               "gap": None if best is None or bound is None else mip_gap(best, bound),
+               "proved": entry.get("status") == "optimal", "bound_kind": bound_kind(entry)}
+        for key in ("found", "bound"):
+            source = entry.get(f"{key}_by")
+            row[f"{key}_by"] = _describe(source) if source else None
+            row[f"{key}_in"] = source.get("run") if source else None
+        rows.append(row)
     return rows

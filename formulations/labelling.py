@@ -174,16 +174,30 @@ def completion_bounds(out_first, arc_head, arc_leg1, arc_leg2, arc_depot, t_star
     (Eq. 10 keeps a trip's deliveries and its pickups each within B; a depot visit
     renews both). Stopping adds nothing, so every entry is <= 0. A bucket whose moves
     within it do not settle in as many passes as there are nodes (a cycle of legs
-    shorter than the step) bounds nothing (-inf)."""
+    shorter than the step) bounds nothing (-inf). Only the steps a label at node i can be
+    in are computed, those of i's window: a label's clock there (and a move's arrival, the
+    recursion's only read) lies within it. The others stay -inf, a bound never read."""
     n_nodes = out_first.shape[0] - 1
     units = -(-capacity // unit)
-    bound = np.zeros((n_steps, n_nodes, units + 1, units + 1))
+    bound = np.full((n_steps, n_nodes, units + 1, units + 1), -np.inf)
+    first_step = np.zeros(n_nodes, np.int64)
+    last_step = np.full(n_nodes, n_steps - 1, np.int64)
+    for i in range(t_start.shape[0]):  # the tasks; the nodes after them are anchors
+        if np.isfinite(t_start[i]):
+            first_step[i] = min(int(t_start[i] / step), n_steps - 1)
+        if np.isfinite(t_end[i]):
+            last_step[i] = min(int(t_end[i] / step), n_steps - 1)
     for b in range(n_steps - 1, -1, -1):
         leave = b * step
+        for i in range(n_nodes):
+            if first_step[i] <= b <= last_step[i]:
+                bound[b, i] = 0.0
         settled = False
         for _ in range(n_nodes + 1):
             changed = False
             for i in range(n_nodes):
+                if b < first_step[i] or b > last_step[i]:
+                    continue
                 for a in range(out_first[i], out_first[i + 1]):
                     j = arc_head[a]
                     if forbidden_task[j] or forbidden_arc[a]:

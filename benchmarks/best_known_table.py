@@ -112,5 +112,6 @@ def main(argv: list[str]) -> int:
     return sync(((PAGE, page_text(rows)), (TABLE, csv_text(rows))), args.check,
                 "the manifests")
 
+
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

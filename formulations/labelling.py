@@ -187,11 +187,10 @@ def completion_bounds(out_first, arc_head, arc_leg1, arc_leg2, arc_depot, t_star
             first_step[i] = min(int(t_start[i] / step), n_steps - 1)
         if np.isfinite(t_end[i]):
             last_step[i] = min(int(t_end[i] / step), n_steps - 1)
+    for i in range(n_nodes):
+        bound[first_step[i]:last_step[i] + 1, i] = 0.0
     for b in range(n_steps - 1, -1, -1):
         leave = b * step
-        for i in range(n_nodes):
-            if first_step[i] <= b <= last_step[i]:
-                bound[b, i] = 0.0
         settled = False
         for _ in range(n_nodes + 1):
             changed = False

@@ -202,9 +202,10 @@ class ColumnGeneration:
         master = self.master
         added = 0
         for schedule in found:
-            closes = best_closes(master.make_column(n, schedule.tail), at)
+            made = master.make_column(n, schedule.tail)
+            closes = best_closes(made, at)
             for k in master.identical.get(n, (n,)):
-                col = master.add_column(k, schedule.tail, closes)
+                col = master.add_column(k, schedule.tail, closes, made)
                 if col is None:
                     continue
                 if not compatible(col, restrictions[k]):

@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import bisect
 import itertools
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
+from numba import njit
 
 from tsac_bench.formulations.branch_price.columns import Column
 
@@ -34,20 +35,61 @@ ARRIVAL_CUT_VIOLATION = 1e-4
 Piece = tuple[float, float, int]  # (lo, hi, source)
 
 
-def cut_coefficient(col: Column, m: int, pieces: Sequence[Piece], demand: float) -> float:
-    """The column's coefficient in an arrival cut of task m: the part of [0, theta_cm) that
-    the pieces of its own AAV, of the closers (when it closes m) and of the goods (weighed
-    by its share a_cm / R_m) cover."""
+class TaskCuts:
+    """One task's arrival cuts, iterable as (row, pieces) in the order added, and packed in
+    arrays: a column's coefficients in all of them come from one compiled loop (the master
+    takes columns by the ten thousand, each into every cut of each task it reaches)."""
+
+    def __init__(self, task: int, demand: float) -> None:
+        self.task = task
+        self.demand = demand
+        self._cuts: list[tuple[int, tuple[Piece, ...]]] = []
+        self.rows = np.zeros(0, np.int64)
+        self._packed = pack([])
+
+    def add(self, row: int, pieces: Sequence[Piece]) -> None:
+        self._cuts.append((row, tuple(pieces)))
+        self.rows = np.array([r for r, _ in self._cuts], np.int64)
+        self._packed = pack([pieces for _, pieces in self._cuts])
+
+    def __iter__(self) -> Iterator[tuple[int, tuple[Piece, ...]]]:
+        return iter(self._cuts)
+
+    def __len__(self) -> int:
+        return len(self._cuts)
+
+    def coefficients(self, col: Column) -> np.ndarray:
+        """The column's coefficient in each cut (``cut_coefficients``), by ``rows``."""
+        return cut_coefficients(col, self.task, self.demand, self._packed)
+
+
+def pack(cuts: Sequence[Sequence[Piece]]) -> tuple[np.ndarray, ...]:
+    """Pieces of cuts as arrays lo, hi, source and the cut of each, the cuts' count last."""
+    flat = [(lo, hi, source, c) for c, pieces in enumerate(cuts) for lo, hi, source in pieces]
+    lo, hi, source, cut = zip(*flat, strict=True) if flat else ((), (), (), ())
+    return (np.array(lo, float), np.array(hi, float), np.array(source, np.int64),
+            np.array(cut, np.int64), np.int64(len(cuts)))
+
+
+def cut_coefficients(col: Column, m: int, demand: float, packed: tuple[np.ndarray, ...]
+                     ) -> np.ndarray:
+    """The column's coefficient in each of task m's ``packed`` cuts: the part of
+    [0, theta_cm) that the pieces of its own AAV, of the closers (when it closes m) and of
+    the goods (weighed by its share a_cm / R_m) cover."""
     theta = col.theta.get(m)
     if theta is None:
-        return 0.0
-    share = col.amounts[m] / demand
-    coef = 0.0
-    for lo, hi, source in pieces:
-        if theta > lo and (source == col.aav or source == GOODS
-                           or (source == CLOSERS and m in col.closes)):
-            coef += (min(theta, hi) - lo) * (share if source == GOODS else 1.0)
-    return coef
+        return np.zeros(int(packed[-1]))
+    return _coefficients(theta, col.amounts[m] / demand, col.aav, m in col.closes, *packed)
+
+
+@njit(cache=True)
+def _coefficients(theta, share, aav, closes, lo, hi, source, cut, n_cuts):
+    out = np.zeros(n_cuts)
+    for p in range(lo.shape[0]):
+        s = source[p]
+        if theta > lo[p] and (s in (aav, GOODS) or (s == CLOSERS and closes)):
+            out[cut[p]] += (min(theta, hi[p]) - lo[p]) * (share if s == GOODS else 1.0)
+    return out
 
 
 def later_shares(m: int, positive: Sequence[Column], x: np.ndarray, demand: float,

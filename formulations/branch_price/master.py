@@ -4,6 +4,7 @@ which a node's branching decisions restrict it."""
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import itertools
 import math
@@ -24,9 +25,11 @@ from tsac_bench.formulations.branch_price.columns import (
 )
 from tsac_bench.formulations.branch_price.cuts import (
     ARRIVAL_CUT_VIOLATION,
-    cut_coefficient,
+    TaskCuts,
+    cut_coefficients,
     largest_share_pieces,
     later_shares,
+    pack,
 )
 from tsac_bench.formulations.branch_price.options import BranchPriceOptions
 from tsac_bench.formulations.network import (
@@ -79,8 +82,8 @@ class Master:
         self.n_rows = 0
         self._task_rows(in_prefix)
         self._task_variables()
-        # Arrival cuts (separate_arrival_cuts) per task: (row, pieces (lo, hi, source)).
-        self.arrival_cuts: dict[int, list[tuple[int, tuple[tuple[float, float, int], ...]]]] = {}
+        # Arrival cuts (separate_arrival_cuts) per task, each a row and its pieces.
+        self.arrival_cuts: dict[int, TaskCuts] = {}
         # Coalition cover cuts (network.coalition_cover_cuts): (row, task, {AAV: coef}).
         self.cuts: list[tuple[int, int, dict[int, int]]] = []
         if self.options.cover_cuts:
@@ -308,14 +311,20 @@ class Master:
             arcs.add((prev, v.node, mode))
             free[v.node] = v.amount
             prev, mode = v.node, DIRECT
-        closes = frozenset(theta) if closes is None else closes & frozenset(theta)
-        return Column(n, tail, route, op, amounts, theta, free, frozenset(arcs), closes)
+        return Column(n, tail, route, op, amounts, theta, free, frozenset(arcs),
+                      _closing(theta, closes))
 
     def add_column(self, n: int, tail: tuple[Visit, ...],
-                   closes: frozenset[int] | None = None) -> Column | None:
+                   closes: frozenset[int] | None = None, made: Column | None = None
+                   ) -> Column | None:
         """The column of AAV n's schedule ``tail`` added to the LP and the pool, or None if
-        the pool has it with the same closing set."""
-        col = self.make_column(n, tail, closes)
+        the pool has it with the same closing set. ``made``: the schedule's column as
+        ``make_column`` gave it for n or an AAV identical to n (same type and start, no
+        prefix: the same walk), copied instead of walking the route again."""
+        if made is None:
+            col = self.make_column(n, tail, closes)
+        else:
+            col = dataclasses.replace(made, aav=n, closes=_closing(made.theta, closes))
         if (n, tail, col.closes) in self.by_key:
             return None
         col.index = self._col(col.op, 0.0, self.inf, self._entries(col))
@@ -345,10 +354,10 @@ class Master:
         for m in col.closes:
             entries += [(self.closer[m], 1.0), (self.closer_time[m], -col.theta[m])]
         for m in col.theta:
-            for row, pieces in self.arrival_cuts.get(m, ()):
-                coef = cut_coefficient(col, m, pieces, self.instance.tasks[m].demand)
-                if coef:
-                    entries.append((row, -coef))
+            if m in self.arrival_cuts:
+                cuts = self.arrival_cuts[m]
+                entries += [(int(row), -float(coef)) for row, coef
+                            in zip(cuts.rows, cuts.coefficients(col), strict=True) if coef]
         return entries
 
     def _register(self, col: Column) -> None:
@@ -499,12 +508,13 @@ class Master:
             if total + x[self.nobody[m]] - x[self.ctime[m]] <= ARRIVAL_CUT_VIOLATION:
                 continue
             entries = [(self.ctime[m], 1.0), (self.nobody[m], -1.0)]
+            packed = pack([pieces])
             for col in self.arriving.get(m, ()):
-                coef = cut_coefficient(col, m, pieces, demand)
+                coef = float(cut_coefficients(col, m, demand, packed)[0])
                 if coef:
                     entries.append((col.index, -coef))
             row = self._row(0.0, self.inf, entries)
-            self.arrival_cuts.setdefault(m, []).append((row, tuple(pieces)))
+            self.arrival_cuts.setdefault(m, TaskCuts(m, demand)).add(row, pieces)
             added += 1
         return added
 
@@ -595,6 +605,12 @@ def _restrictions(decisions: Sequence[BranchDecision], n_aavs: int
         r.forbidden_tasks = frozenset(forbid_t[n])
         r.forbidden_arcs = frozenset(forbid_a[n])
     return restrictions, required, early
+
+
+def _closing(theta: dict[int, float], closes: frozenset[int] | None) -> frozenset[int]:
+    """A column's closing set: ``closes`` (None: every timed task) among the timed tasks
+    it visits on time."""
+    return frozenset(theta) if closes is None else closes & frozenset(theta)
 
 
 def _sparse(entries: Sequence[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:

@@ -899,3 +899,47 @@ def test_completion_bounds_keep_the_root_lp() -> None:
     plain = search_of(instance, completion_steps=0, **options).root()
     bounded = search_of(instance, completion_steps=64, **options).root()
     assert bounded["lp"] == pytest.approx(plain["lp"], rel=1e-9)
+
+
+def test_a_column_copied_for_an_identical_aav_is_the_one_its_walk_gives() -> None:
+    # Pricing one AAV adds its schedules to the AAVs identical to it by copying the column
+    # (add_column's ``made``) instead of walking the route again: every field but the LP
+    # index must be what make_column gives for that AAV, for each closing set.
+    # Instance 505: AAVs 0 and 2 are identical.
+    master = BranchPrice(tiny_instance(505, n_aavs=3, n_tasks=3)).master
+    assert master.identical[0] == (0, 2)
+    tails = [t for t in itertools.islice(all_schedules(master.pricers[0]), 60) if t]
+    copied = 0
+    for tail in tails:
+        made = master.make_column(0, tail)
+        for closes in (None, frozenset(), frozenset(list(made.theta)[:1])):
+            col = master.add_column(2, tail, closes, made)
+            if col is None:
+                continue
+            walked = master.make_column(2, tail, closes)
+            assert dataclasses.replace(col, index=-1) == walked
+            copied += 1
+    assert copied >= 40
+
+
+def test_arrival_cut_coefficients_by_hand() -> None:
+    # A column of AAV 1 reaching task 0 at theta 0.5 with 4 of its 8 kg (share 0.5):
+    # cut A's pieces give 0.2 (its own AAV's [0, 0.2)) + 0.3 x 0.5 (the goods' [0.2, 0.5))
+    # and nothing from the closers' piece past theta; cut B gives AAV 0's piece nothing and
+    # the closers' [0.3, 0.5) 0.2 when the column closes task 0, else nothing.
+    from tsac_bench.formulations.branch_price.columns import Column
+    from tsac_bench.formulations.branch_price.cuts import CLOSERS, GOODS, TaskCuts
+
+    cuts = TaskCuts(0, 8.0)
+    cuts.add(7, [(0.0, 0.2, 1), (0.2, 0.6, GOODS), (0.6, 1.0, CLOSERS)])
+    cuts.add(9, [(0.0, 0.3, 0), (0.3, 1.0, CLOSERS)])
+    assert list(cuts.rows) == [7, 9] and len(cuts) == 2
+
+    def column(closes: frozenset[int], theta: dict[int, float]) -> Column:
+        return Column(1, (), None, 0.0, {0: 4}, theta, {}, frozenset(), closes)
+
+    assert list(cuts.coefficients(column(frozenset({0}), {0: 0.5}))) == \
+        pytest.approx([0.35, 0.2], abs=1e-15)
+    assert list(cuts.coefficients(column(frozenset(), {0: 0.5}))) == \
+        pytest.approx([0.35, 0.0], abs=1e-15)
+    assert list(cuts.coefficients(column(frozenset(), {}))) == [0.0, 0.0]

@@ -21,11 +21,13 @@ of its master.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 from tsac_bench.errors import TsacBenchError
 from tsac_bench.formulations.branch_price.options import BranchPriceOptions
+from tsac_bench.model import Route
 from tsac_bench.model.evaluator import CostEvaluator, costs_agree
 from tsac_bench.planning import (
     Boolean,
@@ -212,6 +214,13 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
 
     def plan(self, state: PlanningState, *, seed: int = 0,
              time_limit: float | None = None) -> PlanResult:
+        return self.plan_from(state, (), seed=seed, time_limit=time_limit)
+
+    def plan_from(self, state: PlanningState, plans: Sequence[tuple[Route, ...]], *,
+                  seed: int = 0, time_limit: float | None = None) -> PlanResult:
+        """``plan`` with ``plans`` among its starts, their routes columns of the master as
+        every start's are: a search that begins where other runs ended (``tsac-bench bks
+        improve`` gives it a set's best-known plan and the plans of earlier runs)."""
         from tsac_bench.formulations.branch_price import BranchPrice
         from tsac_bench.formulations.network import UnsupportedPrefix
 
@@ -219,7 +228,7 @@ class BranchPriceAllocator(BranchPriceOptions, Settings):
         limit = _limit(self.time_limit, time_limit)
         instance = state.instance
         evaluator = state.evaluator()
-        starts = self._starts(state, seed, limit)
+        starts = self._starts(state, seed, limit) + list(plans)
         start = min(starts, key=evaluator.cost)
         stats: dict[str, Any] = {"warm_start_J": evaluator.cost(start),
                                  "warm_start_time": time.perf_counter() - began}

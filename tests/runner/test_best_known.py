@@ -209,3 +209,48 @@ def test_recombining_a_runs_plans_lowers_the_best_known_plan(tmp_path):
     not_a_plan = invoke("bks", "recombine", fresh, fresh / "gen-4-10-s4.json")
     assert not_a_plan.exit_code == 2 and not_a_plan.output.strip().splitlines() == [
         f"error: {fresh / 'gen-4-10-s4.json'}: format: expected 'tsac-bench/solution@1'"]
+
+
+def _invoke(*args):
+    from typer.testing import CliRunner
+
+    from tsac_bench.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def test_improving_searches_an_instance_and_takes_its_plan_and_bound_in(small_set):
+    # Nothing known of quick-2-5-s2 here: exact-bp proves its J* (0.224634) from scratch.
+    result = _invoke("bks", "improve", small_set, "--only", "quick-2-5-s2", "--time-limit", 60)
+    assert result.exit_code == 0, result.output
+    for what in ("plan", "bound"):
+        assert (f"quick-2-5-s2: {what} none -> 0.224634 (exact-bp static (bks improve))"
+                in result.output)
+    entry = read_manifest(small_set).entries["quick-2-5-s2"]
+    assert entry["status"] == "optimal" and entry["J_star"] == pytest.approx(0.2246342466,
+                                                                             abs=1e-9)
+    assert entry["found_by"]["improved_from"] == {"sources": [], "plans": 0}
+    assert entry["bound_by"]["time_limit"] == 60.0
+    assert all(check.passed for check in best_known.check(small_set))
+    again = _invoke("bks", "improve", small_set, "--only", "quick-2-5-s2", "--time-limit", 5)
+    assert "0 improvement(s)" in again.output, again.output
+    unknown = _invoke("bks", "improve", small_set, "--only", "nope")
+    assert unknown.exit_code == 2 and unknown.output.strip().splitlines() == [
+        f"error: {small_set}: --only: no instance named 'nope' here"]
+
+
+def test_improving_starts_from_the_sources_plans(tmp_path):
+    # paper-mc 4/10 seed 4: the library's plan is optimal (J* 10.339542, proved by exact-bp
+    # in 240 s); in one second exact-bp from its own starts ends at 13.53 (measured), so the
+    # plan kept is the source's, and the bound stays below it.
+    directory = tmp_path / "set"
+    directory.mkdir()
+    paper_mc = QUICK.parent / "paper-mc" / "4-10"
+    shutil.copy(paper_mc / "gen-4-10-s4.json", directory)
+    source = paper_mc / "best-known" / "gen-4-10-s4.json"
+    result = _invoke("bks", "improve", directory, source, "--time-limit", 1)
+    assert result.exit_code == 0, result.output
+    assert "gen-4-10-s4: plan none -> 10.339542 (exact-bp static (bks improve))" in result.output
+    entry = read_manifest(directory).entries["gen-4-10-s4"]
+    assert entry["found_by"]["improved_from"] == {"sources": ["gen-4-10-s4.json"], "plans": 1}
+    assert entry["lower_bound"] < 10.339542 and entry["status"] == "feasible"

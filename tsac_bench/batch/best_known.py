@@ -42,10 +42,12 @@ from tsac_bench.model.io import (
     solution_instance_name,
     write_solution,
 )
-from tsac_bench.planning import mip_gap, recorded_claim
+from tsac_bench.planning import PlanningState, mip_gap, recorded_claim
 from tsac_bench.planning.simulator import offline_routes
 
 TASK_BOUND = "tasks-on-their-own"
+#: The key of a ``found_by`` or ``bound_by`` that ``improve`` made: its sources and plans.
+IMPROVED = "improved_from"
 
 
 def offline_plan(solution: Solution) -> Solution:
@@ -95,7 +97,8 @@ def _job_label(row: dict[str, Any], run_dir: Path) -> dict[str, Any]:
 def _describe(found_by: dict[str, Any]) -> str:
     budget = found_by.get("budget")
     return (f"{found_by['method']} {found_by.get('mode', '')}".strip()
-            + ("" if budget is None else f" @ {budget:g} s"))
+            + ("" if budget is None else f" @ {budget:g} s")
+            + (" (bks improve)" if IMPROVED in found_by else ""))
 
 
 def take_plan(entry: dict[str, Any], directory: Path, instance: Instance, solution: Solution,
@@ -223,20 +226,16 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
     return changes
 
 
-def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
-              only: Sequence[str] | None = None) -> list[Change]:
-    """Each instance of ``directory`` that the sources planned (run directories, or
-    solution files such as a set's earlier best-known plans) gets the plan of least J over
-    the routes of all their plans of it and of its best-known plan
-    (``formulations/branch_price/recombine.py``, ``time_limit`` seconds of MIP each), where
-    that is lower than its best-known J. ``only``: those instances."""
-    from tsac_bench.formulations.branch_price.recombine import recombined_plan
-
-    target = _Set(directory)
+def _wanted(target: _Set, only: Sequence[str] | None) -> set[str]:
     unknown = sorted(set(only or ()) - set(target.instances))
     if unknown:
-        raise InputError(str(directory), "--only", f"no instance named {unknown[0]!r} here")
-    wanted = set(only or target.instances)
+        raise InputError(str(target.directory), "--only", f"no instance named {unknown[0]!r} here")
+    return set(only or target.instances)
+
+
+def _source_plans(sources: Sequence[Path], wanted: set[str]) -> dict[str, list[Path]]:
+    """The solution files of the ``wanted`` instances among ``sources`` (run directories,
+    whose finished jobs' plans count, or solution files), by instance."""
     files: dict[str, list[Path]] = {}
     for source in sources:
         if source.is_file():
@@ -249,15 +248,37 @@ def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
         for name, path in planned:
             if name in wanted:
                 files.setdefault(name, []).append(path)
+    return files
+
+
+def _known_plans(target: _Set, name: str, instance: Instance, paths: Sequence[Path]
+                 ) -> list[Solution]:
+    """The offline plans of ``paths`` and the instance's best-known plan."""
+    entry = target.entry(name)
+    solutions = [offline_plan(read_solution(path, instance)) for path in paths]
+    if entry.get("best_plan"):
+        solutions.append(read_solution(target.directory / entry["best_plan"], instance))
+    return solutions
+
+
+def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
+              only: Sequence[str] | None = None) -> list[Change]:
+    """Each instance of ``directory`` that the sources planned (run directories, or
+    solution files such as a set's earlier best-known plans) gets the plan of least J over
+    the routes of all their plans of it and of its best-known plan
+    (``formulations/branch_price/recombine.py``, ``time_limit`` seconds of MIP each), where
+    that is lower than its best-known J. ``only``: those instances."""
+    from tsac_bench.formulations.branch_price.recombine import recombined_plan
+
+    target = _Set(directory)
+    files = _source_plans(sources, _wanted(target, only))
     found_by = {"method": "recombine", "runs": [source.name for source in sources],
                 "time_limit": time_limit}
     changes = []
     for name, paths in sorted(files.items()):
         instance = read_instance(target.instances[name])
         entry = target.entry(name)
-        solutions = [offline_plan(read_solution(path, instance)) for path in paths]
-        if entry.get("best_plan"):
-            solutions.append(read_solution(directory / entry["best_plan"], instance))
+        solutions = _known_plans(target, name, instance, paths)
         routes = recombined_plan(instance, [s.routes for s in solutions], time_limit)
         before = entry.get("best_J") if entry.get("best_plan") else None
         if routes is not None and take_plan(
@@ -267,6 +288,51 @@ def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
             target.changed = True
     if target.changed:
         write_manifest(target.manifest)
+    return changes
+
+
+def improve(directory: Path, sources: Sequence[Path], time_limit: float,
+            only: Sequence[str] | None = None,
+            note: Callable[[str], None] = print) -> list[Change]:
+    """Search each instance of ``directory`` (``only``: those; else those the sources
+    planned, or every instance where there are no sources) with ``exact-bp`` for
+    ``time_limit`` seconds, its own starts joined by the instance's best-known plan and the
+    sources' plans of it (every route of them a column of its master: the integer master
+    and the dives recombine them with the routes it prices); take its plan where lower and
+    its bound where higher. The manifest is written after each instance, so a stopped
+    search keeps what the finished ones found."""
+    from tsac_bench.solvers.exact import BranchPriceAllocator
+
+    target = _Set(directory)
+    wanted = _wanted(target, only)
+    files = _source_plans(sources, wanted)
+    search = BranchPriceAllocator(time_limit=time_limit)
+    label = {"method": search.name, "settings": search.settings(), "mode": "static",
+             "seed": 0, "budget": None, "time_limit": time_limit}
+    changes = []
+    for name in sorted(wanted if only or not sources else files):
+        instance = read_instance(target.instances[name])
+        entry = target.entry(name)
+        plans = _known_plans(target, name, instance, files.get(name, ()))
+        note(f"{name}: exact-bp for {time_limit:g} s from {len(plans)} known plan(s)")
+        result = search.plan_from(PlanningState.static(instance), [p.routes for p in plans],
+                                  time_limit=time_limit)
+        found_by = {**label, IMPROVED: {"sources": [source.name for source in sources],
+                                        "plans": len(plans)}}
+        where = f"improving {name}"
+        before = entry.get("best_J") if entry.get("best_plan") else None
+        found = take_plan(entry, directory, instance, Solution(name, result.routes), found_by,
+                          where)
+        if found:
+            changes.append(Change(name, "plan", before, entry["best_J"], _describe(found_by)))
+        before = entry.get("lower_bound")
+        bounded = result.lower_bound is not None and take_bound(entry, result.lower_bound,
+                                                                found_by, where)
+        if bounded:
+            changes.append(Change(name, "bound", before, entry["lower_bound"],
+                                  _describe(found_by)))
+        if found or bounded:
+            write_manifest(target.manifest)
     return changes
 
 

@@ -111,6 +111,31 @@ def bks_recombine(
 
 
 
+@bks_app.command("improve")
+@user_errors
+def bks_improve(
+    directory: Annotated[Path, typer.Argument(metavar="DIR")],
+    sources: Annotated[list[Path] | None, typer.Argument(
+        metavar="[SOURCE...]", help="run directories or solution files whose plans start "
+        "the search too")] = None,
+    time_limit: Annotated[float, typer.Option(min=0.01, help="seconds of exact-bp per "
+                                              "instance")] = 600.0,
+    only: Annotated[list[str] | None, typer.Option(help="instance name(s) to search")]
+    = None,
+) -> None:
+    """Search, per instance of DIR (--only, else those the sources planned, else all), with
+    exact-bp from its best-known plan and the sources' plans; keep its plan where lower and
+    its bound where higher."""
+    from tsac_bench.batch import best_known
+
+    changes = best_known.improve(directory, sources or [], time_limit, only, note=say_error)
+    for c in changes:
+        was = "none" if c.before is None else f"{c.before:.6f}"
+        console.print(f"{c.instance}: {c.what} {was} -> {c.after:.6f} ({c.by})")
+    console.print(f"{len(changes)} improvement(s)")
+
+
+
 @bks_app.command("bound")
 @user_errors
 def bks_bound(directory: Annotated[Path, typer.Argument(metavar="DIR")]) -> None:

@@ -231,6 +231,8 @@ def test_improving_searches_an_instance_and_takes_its_plan_and_bound_in(small_se
                                                                              abs=1e-9)
     assert entry["found_by"]["improved_from"] == {"sources": [], "plans": 0}
     assert entry["bound_by"]["time_limit"] == 60.0
+    settings = entry["found_by"]["settings"]  # as a run's job records them
+    assert list(settings) == sorted(settings) and settings["time_limit"] is None
     assert all(check.passed for check in best_known.check(small_set))
     again = _invoke("bks", "improve", small_set, "--only", "quick-2-5-s2", "--time-limit", 5)
     assert "0 improvement(s)" in again.output, again.output

@@ -306,9 +306,10 @@ def improve(directory: Path, sources: Sequence[Path], time_limit: float,
     target = _Set(directory)
     wanted = _wanted(target, only)
     files = _source_plans(sources, wanted)
-    search = BranchPriceAllocator(time_limit=time_limit)
-    label = {"method": search.name, "settings": search.settings(), "mode": "static",
-             "seed": 0, "budget": None, "time_limit": time_limit}
+    search = BranchPriceAllocator()
+    # As a run's job records them: the settings in order, the time limit beside them.
+    label = {"method": search.name, "settings": dict(sorted(search.settings().items())),
+             "mode": "static", "seed": 0, "budget": None, "time_limit": time_limit}
     changes = []
     for name in sorted(wanted if only or not sources else files):
         instance = read_instance(target.instances[name])

@@ -172,6 +172,25 @@ def carried_over(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
     return entry
 
 
+def _take(target: _Set, entry: dict[str, Any], instance: Instance,
+          solution: Solution | None, found_by: dict[str, Any], bound: float | None,
+          bound_by: dict[str, Any], where: str) -> list[Change]:
+    """Take a plan and a bound (either may be None) into ``entry``; the changes they made."""
+    changes = []
+    if solution is not None:
+        before = entry.get("best_J") if entry.get("best_plan") else None
+        if take_plan(entry, target.directory, instance, solution, found_by, where):
+            changes.append(Change(instance.name, "plan", before, entry["best_J"],
+                                  _describe(found_by)))
+    if bound is not None:
+        before = entry.get("lower_bound")
+        if take_bound(entry, bound, bound_by, where):
+            changes.append(Change(instance.name, "bound", before, entry["lower_bound"],
+                                  _describe(found_by)))
+    target.changed = target.changed or bool(changes)
+    return changes
+
+
 def update(run_dir: Path, sets: Iterable[Path] | None = None,
            note: Callable[[str], None] = print) -> list[Change]:
     """Take ``run_dir``'s better plans and bounds into the manifests of the instance sets
@@ -199,25 +218,16 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
         instance = instances[name]
         entry = target.entry(name)
         found_by = _job_label(row, run_dir)
-        if row.get("solution_file"):
-            where = run_dir / row["solution_file"]
-            before = entry.get("best_J") if entry.get("best_plan") else None
-            if take_plan(entry, target.directory, instance, read_solution(where, instance),
-                         found_by, f"{run_dir} job {row['key']}"):
-                changes.append(Change(name, "plan", before, entry["best_J"],
-                                      _describe(found_by)))
-                target.changed = True
+        solution = (read_solution(run_dir / row["solution_file"], instance)
+                    if row.get("solution_file") else None)
         # The job's own claim (its stats), not the row's lower_bound column, which is the
         # manifest's bound copied in when the job was planned. A dynamic run's plan calls
         # bound their re-planning states, not the instance.
         _, bound = recorded_claim(row.get("stats"))
-        if bound is not None and row["mode"] == "static":
-            bound_by = {**found_by, "time_limit": row.get("time_limit")}
-            before = entry.get("lower_bound")
-            if take_bound(entry, bound, bound_by, f"{run_dir} job {row['key']}"):
-                changes.append(Change(name, "bound", before, entry["lower_bound"],
-                                      _describe(found_by)))
-                target.changed = True
+        changes += _take(target, entry, instance, solution, found_by,
+                         bound if row["mode"] == "static" else None,
+                         {**found_by, "time_limit": row.get("time_limit")},
+                         f"{run_dir} job {row['key']}")
     for s in loaded:
         if s.changed:
             write_manifest(s.manifest)
@@ -320,20 +330,11 @@ def improve(directory: Path, sources: Sequence[Path], time_limit: float,
                                   time_limit=time_limit)
         found_by = {**label, IMPROVED: {"sources": [source.name for source in sources],
                                         "plans": len(plans)}}
-        where = f"improving {name}"
-        before = entry.get("best_J") if entry.get("best_plan") else None
-        found = take_plan(entry, directory, instance, Solution(name, result.routes), found_by,
-                          where)
-        if found:
-            changes.append(Change(name, "plan", before, entry["best_J"], _describe(found_by)))
-        before = entry.get("lower_bound")
-        bounded = result.lower_bound is not None and take_bound(entry, result.lower_bound,
-                                                                found_by, where)
-        if bounded:
-            changes.append(Change(name, "bound", before, entry["lower_bound"],
-                                  _describe(found_by)))
-        if found or bounded:
+        taken = _take(target, entry, instance, Solution(name, result.routes), found_by,
+                      result.lower_bound, found_by, f"improving {name}")
+        if taken:
             write_manifest(target.manifest)
+        changes += taken
     return changes
 
 

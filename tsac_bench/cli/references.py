@@ -81,10 +81,7 @@ def bks_update(
     from tsac_bench.batch import best_known
 
     changes = best_known.update(run_dir, instance_set or None, note=say_error)
-    for c in changes:
-        was = "none" if c.before is None else f"{c.before:.6f}"
-        console.print(f"{c.instance}: {c.what} {was} -> {c.after:.6f} ({c.by})")
-    console.print(f"{len(changes)} improvement(s)")
+    _print_changes(changes)
 
 
 
@@ -129,10 +126,7 @@ def bks_improve(
     from tsac_bench.batch import best_known
 
     changes = best_known.improve(directory, sources or [], time_limit, only, note=say_error)
-    for c in changes:
-        was = "none" if c.before is None else f"{c.before:.6f}"
-        console.print(f"{c.instance}: {c.what} {was} -> {c.after:.6f} ({c.by})")
-    console.print(f"{len(changes)} improvement(s)")
+    _print_changes(changes)
 
 
 
@@ -165,3 +159,10 @@ def bks_show(directory: Annotated[Path, typer.Argument(metavar="DIR")]) -> None:
 def _number(value: float | None) -> str:
     return "-" if value is None else f"{value:.6f}"
 
+
+
+def _print_changes(changes: list) -> None:
+    for c in changes:
+        was = "none" if c.before is None else f"{c.before:.6f}"
+        console.print(f"{c.instance}: {c.what} {was} -> {c.after:.6f} ({c.by})")
+    console.print(f"{len(changes)} improvement(s)")

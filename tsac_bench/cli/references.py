@@ -4,12 +4,15 @@ and bounds (``bks``)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
 from tsac_bench.cli.app import app, console, say_error, user_errors
+
+if TYPE_CHECKING:
+    from tsac_bench.batch.best_known import Change
 
 
 @app.command()
@@ -160,8 +163,8 @@ def _number(value: float | None) -> str:
     return "-" if value is None else f"{value:.6f}"
 
 
-
-def _print_changes(changes: list) -> None:
+def _print_changes(changes: list[Change]) -> None:
+    """A line per plan or bound taken in, then their count."""
     for c in changes:
         was = "none" if c.before is None else f"{c.before:.6f}"
         console.print(f"{c.instance}: {c.what} {was} -> {c.after:.6f} ({c.by})")

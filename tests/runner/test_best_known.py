@@ -256,3 +256,67 @@ def test_improving_starts_from_the_sources_plans(tmp_path):
     entry = read_manifest(directory).entries["gen-4-10-s4"]
     assert entry["found_by"]["improved_from"] == {"sources": ["gen-4-10-s4.json"], "plans": 1}
     assert entry["lower_bound"] < 10.339542 and entry["status"] == "feasible"
+
+
+def _another_search_raises_a_bound(directory, name, bound):
+    """What a second search on the same set does while the first one runs: it writes the
+    manifest with a higher bound of another instance."""
+    data = json.loads((directory / "manifest.json").read_text())
+    data["instances"][name]["lower_bound"] = bound
+    (directory / "manifest.json").write_text(json.dumps(data))
+
+
+def test_two_searches_on_one_set_keep_each_others_results(small_set, monkeypatch):
+    # `bks improve` and `prove` read the manifest at their start and search for hours; what
+    # another search wrote meanwhile (quick-4-10-s5's bound 1.38 -> 1.39) must survive
+    # their own write.
+    from tsac_bench.batch import verify
+    from tsac_bench.solvers.exact import BranchPriceAllocator
+
+    search = BranchPriceAllocator.plan_from
+
+    def searched_beside_another(self, *args, **kwargs):
+        _another_search_raises_a_bound(small_set, "quick-4-10-s5", 1.39)
+        return search(self, *args, **kwargs)
+
+    monkeypatch.setattr(BranchPriceAllocator, "plan_from", searched_beside_another)
+    best_known.improve(small_set, [], 60, only=["quick-2-5-s2"], note=lambda _: None)
+    entries = read_manifest(small_set).entries
+    assert entries["quick-4-10-s5"]["lower_bound"] == 1.39
+    assert entries["quick-2-5-s2"]["J_star"] == pytest.approx(0.2246342466, abs=1e-9)
+
+    monkeypatch.undo()  # exact-bp's own search, not the 1.39 again
+    solve = verify.solve_exact
+
+    def solved_beside_another(*args, **kwargs):
+        _another_search_raises_a_bound(small_set, "quick-4-10-s5", 1.4)
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(verify, "solve_exact", solved_beside_another)
+    verify.prove(small_set, 60, "test", names=["quick-2-4-s1"], methods=["exact-bp"],
+                 log=lambda _: None)
+    entries = read_manifest(small_set).entries
+    assert entries["quick-4-10-s5"]["lower_bound"] == 1.4
+    assert entries["quick-2-4-s1"]["solvers"]["exact-bp"]["status"] == "optimal"
+    assert entries["quick-2-5-s2"]["J_star"] == pytest.approx(0.2246342466, abs=1e-9)
+
+
+def test_the_manifest_lock_makes_a_second_writer_wait(tmp_path):
+    import threading
+    import time
+
+    from tsac_bench.batch.manifests import manifest_lock
+
+    order = []
+
+    def second():
+        with manifest_lock(tmp_path):
+            order.append("second")
+
+    with manifest_lock(tmp_path):
+        waiting = threading.Thread(target=second)
+        waiting.start()
+        time.sleep(0.2)  # the thread has long reached the lock: it waits there
+        order.append("first")
+    waiting.join(10)
+    assert order == ["first", "second"]

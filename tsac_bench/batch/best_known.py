@@ -21,6 +21,7 @@ run's better plans and bounds in; ``check`` re-evaluates every stored plan.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,7 @@ from tsac_bench.batch.manifests import (
     PLAN_FOLDER,
     Manifest,
     iter_instance_files,
+    manifest_lock,
     read_manifest,
     write_manifest,
 )
@@ -202,35 +204,40 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
     if sets is None:
         sets = sorted({Path(row["instance_file"]).parent for row in rows
                        if row.get("instance_file")})
-    loaded = [_Set(Path(directory)) for directory in sets]
-    by_name = {name: s for s in loaded for name in s.instances}
     changes: list[Change] = []
-    instances: dict[str, Instance] = {}
     skipped = 0
-    for row in rows:
-        target = by_name.get(row["instance"])
-        if target is None:
-            skipped += 1
-            continue
-        name = row["instance"]
-        if name not in instances:
-            instances[name] = read_instance(target.instances[name])
-        instance = instances[name]
-        entry = target.entry(name)
-        found_by = _job_label(row, run_dir)
-        solution = (read_solution(run_dir / row["solution_file"], instance)
-                    if row.get("solution_file") else None)
-        # The job's own claim (its stats), not the row's lower_bound column, which is the
-        # manifest's bound copied in when the job was planned. A dynamic run's plan calls
-        # bound their re-planning states, not the instance.
-        _, bound = recorded_claim(row.get("stats"))
-        changes += _take(target, entry, instance, solution, found_by,
-                         bound if row["mode"] == "static" else None,
-                         {**found_by, "time_limit": row.get("time_limit")},
-                         f"{run_dir} job {row['key']}")
-    for s in loaded:
-        if s.changed:
-            write_manifest(s.manifest)
+    with ExitStack() as held:
+        # Every set's manifest held from its read to its write, in one order (so that no
+        # two updates wait on each other).
+        for directory in sorted({Path(d).resolve() for d in sets}):
+            held.enter_context(manifest_lock(directory))
+        loaded = [_Set(Path(directory)) for directory in sets]
+        by_name = {name: s for s in loaded for name in s.instances}
+        instances: dict[str, Instance] = {}
+        for row in rows:
+            target = by_name.get(row["instance"])
+            if target is None:
+                skipped += 1
+                continue
+            name = row["instance"]
+            if name not in instances:
+                instances[name] = read_instance(target.instances[name])
+            instance = instances[name]
+            entry = target.entry(name)
+            found_by = _job_label(row, run_dir)
+            solution = (read_solution(run_dir / row["solution_file"], instance)
+                        if row.get("solution_file") else None)
+            # The job's own claim (its stats), not the row's lower_bound column, which is the
+            # manifest's bound copied in when the job was planned. A dynamic run's plan calls
+            # bound their re-planning states, not the instance.
+            _, bound = recorded_claim(row.get("stats"))
+            changes += _take(target, entry, instance, solution, found_by,
+                             bound if row["mode"] == "static" else None,
+                             {**found_by, "time_limit": row.get("time_limit")},
+                             f"{run_dir} job {row['key']}")
+        for s in loaded:
+            if s.changed:
+                write_manifest(s.manifest)
     if skipped:
         note(f"{skipped} job(s) of instances in none of the sets were left out")
     return changes
@@ -287,17 +294,18 @@ def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
     changes = []
     for name, paths in sorted(files.items()):
         instance = read_instance(target.instances[name])
-        entry = target.entry(name)
         solutions = _known_plans(target, name, instance, paths)
         routes = recombined_plan(instance, [s.routes for s in solutions], time_limit)
-        before = entry.get("best_J") if entry.get("best_plan") else None
-        if routes is not None and take_plan(
-                entry, directory, instance, Solution(name, routes),
-                {**found_by, "plans": len(solutions)}, f"recombining {name}"):
-            changes.append(Change(name, "plan", before, entry["best_J"], "recombine"))
-            target.changed = True
-    if target.changed:
-        write_manifest(target.manifest)
+        if routes is None:
+            continue
+        with manifest_lock(directory):
+            now = _Set(directory)  # as other searches on the set may have left it meanwhile
+            entry = now.entry(name)
+            before = entry.get("best_J") if entry.get("best_plan") else None
+            if take_plan(entry, directory, instance, Solution(name, routes),
+                         {**found_by, "plans": len(solutions)}, f"recombining {name}"):
+                changes.append(Change(name, "plan", before, entry["best_J"], "recombine"))
+                write_manifest(now.manifest)
     return changes
 
 
@@ -323,17 +331,18 @@ def improve(directory: Path, sources: Sequence[Path], time_limit: float,
     changes = []
     for name in sorted(wanted if only or not sources else files):
         instance = read_instance(target.instances[name])
-        entry = target.entry(name)
         plans = _known_plans(target, name, instance, files.get(name, ()))
         note(f"{name}: exact-bp for {time_limit:g} s from {len(plans)} known plan(s)")
         result = search.plan_from(PlanningState.static(instance), [p.routes for p in plans],
                                   time_limit=time_limit)
         found_by = {**label, IMPROVED: {"sources": [source.name for source in sources],
                                         "plans": len(plans)}}
-        taken = _take(target, entry, instance, Solution(name, result.routes), found_by,
-                      result.lower_bound, found_by, f"improving {name}")
-        if taken:
-            write_manifest(target.manifest)
+        with manifest_lock(directory):
+            now = _Set(directory)  # as other searches on the set may have left it meanwhile
+            taken = _take(now, now.entry(name), instance, Solution(name, result.routes),
+                          found_by, result.lower_bound, found_by, f"improving {name}")
+            if taken:
+                write_manifest(now.manifest)
         changes += taken
     return changes
 
@@ -344,14 +353,15 @@ def add_task_bounds(directory: Path) -> int:
     from tsac_bench.formulations.task_bound import task_lower_bound
     from tsac_bench.planning import PlanningState
 
-    target = _Set(directory)
     raised = 0
-    for name, path in sorted(target.instances.items()):
-        bound = task_lower_bound(PlanningState.static(read_instance(path)))
-        if take_bound(target.entry(name), bound, {"method": TASK_BOUND}, str(path)):
-            raised += 1
-    if raised:
-        write_manifest(target.manifest)
+    with manifest_lock(directory):
+        target = _Set(directory)
+        for name, path in sorted(target.instances.items()):
+            bound = task_lower_bound(PlanningState.static(read_instance(path)))
+            if take_bound(target.entry(name), bound, {"method": TASK_BOUND}, str(path)):
+                raised += 1
+        if raised:
+            write_manifest(target.manifest)
     return raised
 
 

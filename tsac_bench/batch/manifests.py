@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -117,6 +120,31 @@ def read_manifest(directory: Path) -> Manifest:
             continue
         manifest.entries[name] = entry
     return manifest
+
+
+@contextmanager
+def manifest_lock(directory: Path) -> Iterator[None]:
+    """Hold ``directory``'s manifest for one read-change-write: an exclusive lock (flock on
+    the directory itself, so no lock file is left beside the instances) that the same
+    section of any other process waits for. The searches that run for hours (``bks
+    improve``, ``bks recombine``, ``prove``) write after each instance; each reads the
+    manifest afresh under it, so two of them on one set add to each other's results instead
+    of writing over them with what they read at their start."""
+    try:
+        import fcntl
+
+        handle = os.open(directory, os.O_RDONLY)
+    except ImportError:  # not POSIX: no advisory locks; one writer at a time is then the rule
+        yield
+        return
+    except OSError:  # no such directory: the read that follows says so, in one line
+        yield
+        return
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(handle)  # releases the lock
 
 
 def write_manifest(manifest: Manifest) -> None:

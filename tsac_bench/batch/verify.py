@@ -18,6 +18,7 @@ from tsac_bench.batch.best_known import carried_over
 from tsac_bench.batch.manifests import (
     Manifest,
     iter_instance_files,
+    manifest_lock,
     read_manifest,
     write_manifest,
 )
@@ -90,15 +91,20 @@ def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
         name = read_instance(file).name
         if wanted is not None and name not in wanted:
             continue
-        results = dict(manifest.entries.get(name, {}).get("solvers", {}))
-        for m in methods:
-            results[m] = solve_exact(file, m, time_limit, threads) | {"command": command}
-        entry = carried_over(manifest.entries.get(name, {}),
-                             entry_from(results, file.name, command))
-        manifest.entries[name] = entry
+        solved = {m: solve_exact(file, m, time_limit, threads) | {"command": command}
+                  for m in methods}
+        with manifest_lock(directory):
+            # As other runs on the set may have left it meanwhile, not as it was at the start.
+            manifest = read_manifest(directory)
+            if manifest.path.exists():
+                manifest.require_valid()
+            old = manifest.entries.get(name, {})
+            results = {**old.get("solvers", {}), **solved}
+            entry = carried_over(old, entry_from(results, file.name, command))
+            manifest.entries[name] = entry
+            write_manifest(manifest)
         log(f"{name}: {entry['status']} J*={entry['J_star']} LB={entry['lower_bound']:.6f} "
             + " ".join(f"{m}={r['status']}/{r['wall_time']:.1f}s" for m, r in results.items()))
-        write_manifest(manifest)
     return manifest
 
 

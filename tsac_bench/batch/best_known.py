@@ -20,8 +20,8 @@ run's better plans and bounds in; ``check`` re-evaluates every stored plan.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
-from contextlib import ExitStack
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -89,6 +89,18 @@ class _Set:
                      "status": "feasible"}
             self.manifest.entries[name] = entry
         return entry
+
+
+@contextmanager
+def _held(directory: Path) -> Iterator[_Set]:
+    """The set as it is now, read under its manifest lock (``manifest_lock``: other searches
+    on it may have written since this one began) and written back, if changed, before the
+    lock goes."""
+    with manifest_lock(directory):
+        current = _Set(directory)
+        yield current
+        if current.changed:
+            write_manifest(current.manifest)
 
 
 def _job_label(row: dict[str, Any], run_dir: Path) -> dict[str, Any]:
@@ -206,12 +218,12 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
                        if row.get("instance_file")})
     changes: list[Change] = []
     skipped = 0
-    with ExitStack() as held:
-        # Every set's manifest held from its read to its write, in one order (so that no
-        # two updates wait on each other).
-        for directory in sorted({Path(d).resolve() for d in sets}):
-            held.enter_context(manifest_lock(directory))
-        loaded = [_Set(Path(directory)) for directory in sets]
+    with ExitStack() as stack:
+        # Every set held from its read to its write, taken in one order (so that no two
+        # updates wait on each other).
+        held = {directory: stack.enter_context(_held(directory))
+                for directory in sorted({Path(d).resolve() for d in sets})}
+        loaded = [held[Path(d).resolve()] for d in sets]
         by_name = {name: s for s in loaded for name in s.instances}
         instances: dict[str, Instance] = {}
         for row in rows:
@@ -235,9 +247,6 @@ def update(run_dir: Path, sets: Iterable[Path] | None = None,
                              bound if row["mode"] == "static" else None,
                              {**found_by, "time_limit": row.get("time_limit")},
                              f"{run_dir} job {row['key']}")
-        for s in loaded:
-            if s.changed:
-                write_manifest(s.manifest)
     if skipped:
         note(f"{skipped} job(s) of instances in none of the sets were left out")
     return changes
@@ -298,14 +307,10 @@ def recombine(directory: Path, sources: Sequence[Path], time_limit: float,
         routes = recombined_plan(instance, [s.routes for s in solutions], time_limit)
         if routes is None:
             continue
-        with manifest_lock(directory):
-            now = _Set(directory)  # as other searches on the set may have left it meanwhile
-            entry = now.entry(name)
-            before = entry.get("best_J") if entry.get("best_plan") else None
-            if take_plan(entry, directory, instance, Solution(name, routes),
-                         {**found_by, "plans": len(solutions)}, f"recombining {name}"):
-                changes.append(Change(name, "plan", before, entry["best_J"], "recombine"))
-                write_manifest(now.manifest)
+        with _held(directory) as now:
+            changes += _take(now, now.entry(name), instance, Solution(name, routes),
+                             {**found_by, "plans": len(solutions)}, None, {},
+                             f"recombining {name}")
     return changes
 
 
@@ -337,13 +342,9 @@ def improve(directory: Path, sources: Sequence[Path], time_limit: float,
                                   time_limit=time_limit)
         found_by = {**label, IMPROVED: {"sources": [source.name for source in sources],
                                         "plans": len(plans)}}
-        with manifest_lock(directory):
-            now = _Set(directory)  # as other searches on the set may have left it meanwhile
-            taken = _take(now, now.entry(name), instance, Solution(name, result.routes),
-                          found_by, result.lower_bound, found_by, f"improving {name}")
-            if taken:
-                write_manifest(now.manifest)
-        changes += taken
+        with _held(directory) as now:
+            changes += _take(now, now.entry(name), instance, Solution(name, result.routes),
+                             found_by, result.lower_bound, found_by, f"improving {name}")
     return changes
 
 
@@ -354,14 +355,12 @@ def add_task_bounds(directory: Path) -> int:
     from tsac_bench.planning import PlanningState
 
     raised = 0
-    with manifest_lock(directory):
-        target = _Set(directory)
+    with _held(directory) as target:
         for name, path in sorted(target.instances.items()):
             bound = task_lower_bound(PlanningState.static(read_instance(path)))
             if take_bound(target.entry(name), bound, {"method": TASK_BOUND}, str(path)):
                 raised += 1
-        if raised:
-            write_manifest(target.manifest)
+        target.changed = raised > 0
     return raised
 
 

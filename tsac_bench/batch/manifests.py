@@ -134,10 +134,9 @@ def manifest_lock(directory: Path) -> Iterator[None]:
         import fcntl
 
         handle = os.open(directory, os.O_RDONLY)
-    except ImportError:  # not POSIX: no advisory locks; one writer at a time is then the rule
-        yield
-        return
-    except OSError:  # no such directory: the read that follows says so, in one line
+    except (ImportError, OSError):
+        # Not POSIX (no advisory locks: one writer at a time is then the rule), or no such
+        # directory (the read that follows says so, in one line).
         yield
         return
     try:

@@ -73,6 +73,15 @@ def entry_from(results: dict[str, dict[str, Any]], file: str, command: str) -> d
     }
 
 
+def _readable_manifest(directory: Path) -> Manifest:
+    """``directory``'s manifest, the first problem of one that exists raised (an absent one
+    is empty: ``prove`` writes its first content)."""
+    manifest = read_manifest(directory)
+    if manifest.path.exists():
+        manifest.require_valid()
+    return manifest
+
+
 def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
           names: Iterable[str] | None = None, log: Any = print,
           methods: Sequence[str] | None = None) -> Manifest:
@@ -82,9 +91,7 @@ def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
     under its own time limit); entries of instances not solved this time are kept."""
     from tsac_bench.model.io import read_instance
 
-    manifest = read_manifest(directory)
-    if manifest.path.exists():
-        manifest.require_valid()
+    manifest = _readable_manifest(directory)  # a malformed one stops it before any solving
     wanted = set(names) if names is not None else None
     methods = exact_methods() if methods is None else list(methods)
     for file in iter_instance_files([directory]):
@@ -95,9 +102,7 @@ def prove(directory: Path, time_limit: float, command: str, threads: int = 1,
                   for m in methods}
         with manifest_lock(directory):
             # As other runs on the set may have left it meanwhile, not as it was at the start.
-            manifest = read_manifest(directory)
-            if manifest.path.exists():
-                manifest.require_valid()
+            manifest = _readable_manifest(directory)
             old = manifest.entries.get(name, {})
             results = {**old.get("solvers", {}), **solved}
             entry = carried_over(old, entry_from(results, file.name, command))

@@ -287,13 +287,16 @@ def late_committed(instance: Instance, committed: Sequence[Route]) -> set[tuple[
     return late
 
 
-def identical_groups(instance: Instance, committed: Sequence[Route]) -> list[list[int]]:
-    """Groups (size >= 2) of interchangeable AAVs: same parameters, same start, no prefix."""
+def identical_groups(instance: Instance, committed: Sequence[Route],
+                     reach: Sequence[frozenset[int] | None] | None = None) -> list[list[int]]:
+    """Groups (size >= 2) of interchangeable AAVs: same parameters, same start, no prefix
+    and, where ``reach`` limits each AAV's tasks, the same tasks in reach."""
     groups: dict[tuple, list[int]] = {}
     for n, a in enumerate(instance.aavs):
         if committed and committed[n]:
             continue
-        key = (a.x, a.y, a.speed, a.capacity, a.max_range, a.alpha, a.lam)
+        key = (a.x, a.y, a.speed, a.capacity, a.max_range, a.alpha, a.lam,
+               None if reach is None else reach[n])
         groups.setdefault(key, []).append(n)
     return [g for g in groups.values() if len(g) > 1]
 

@@ -66,14 +66,16 @@ class Master:
 
     def __init__(self, instance: Instance, tasks: Sequence[int] | None,
                  committed: Sequence[Route] | None, plan_time: float,
-                 options: BranchPriceOptions) -> None:
+                 options: BranchPriceOptions,
+                 reach: Sequence[frozenset[int] | None] | None = None) -> None:
         import highspy
 
         self.instance = instance
         moment, in_prefix, late = self._state(tasks, committed, plan_time)
+        self.reach = tuple(reach) if reach is not None else None
         self.options = options.for_tasks(len(self.tasks))
         self.pricers = [self._pricer(moment, n) for n in range(instance.n_aavs)]
-        self.identical = _identical(instance, self.committed)
+        self.identical = _identical(instance, self.committed, self.reach)
         self.h = highspy.Highs()
         self.h.setOptionValue("output_flag", False)
         self.h.setOptionValue("threads", int(self.options.threads))
@@ -146,7 +148,11 @@ class Master:
         trailing = None if prefix.trailing_depot is None else (prefix.last,
                                                                  prefix.trailing_depot)
         leaves = moment.anchor(n)
-        network = aav_network(instance, n, self.tasks,
+        tasks = self.tasks
+        if self.reach is not None and self.reach[n] is not None:
+            own = {m for _, m, _, _ in prefix.steps}
+            tasks = [m for m in tasks if m in self.reach[n] or m in own]
+        network = aav_network(instance, n, tasks,
                               prefix_arrivals(instance, n, self.committed[n]), required,
                               trailing, prefix.last, leaves.time)
         anchor = anchor_of(instance, n, self.committed[n], prefix.trailing_depot,
@@ -207,7 +213,7 @@ class Master:
         """Identical AAVs n1 < n2 (same type and start, no prefix) ordered as in the MILP: n2
         visits task j only if n1 visits a task i <= j (a plan's identical routes can be
         permuted into that order). Rows x_{n1, i <= j} - x_{n2, j} >= 0."""
-        for group in identical_groups(self.instance, self.committed):
+        for group in identical_groups(self.instance, self.committed, self.reach):
             for n1, n2 in itertools.pairwise(group):
                 for j in self.pricers[n2].network.tasks:
                     self.symmetry.append((self._row(0.0, self.inf), n1, n2, j))
@@ -619,10 +625,12 @@ def _sparse(entries: Sequence[tuple[int, float]]) -> tuple[np.ndarray, np.ndarra
             np.array([v for _, v in entries], float))
 
 
-def _identical(instance: Instance, committed: Sequence[Route]) -> dict[int, tuple[int, ...]]:
+def _identical(instance: Instance, committed: Sequence[Route],
+               reach: Sequence[frozenset[int] | None] | None
+               ) -> dict[int, tuple[int, ...]]:
     """Each AAV of a group of identical ones, with its group (pricing one prices all)."""
     groups = {}
-    for group in identical_groups(instance, committed):
+    for group in identical_groups(instance, committed, reach):
         for n in group:
             groups[n] = tuple(group)
     return groups

@@ -108,13 +108,16 @@ class _Run:
 
 class BranchPrice:
     """The whole method for one planning state (tasks, committed prefixes): ``master``
-    (the LP and its columns), ``pricing`` (column generation) and ``branching``."""
+    (the LP and its columns), ``pricing`` (column generation) and ``branching``.
+    ``reach``: per AAV, the tasks its free visits may take (None: every task of the state),
+    as a neighbourhood search holds most AAVs to their routes (``neighbourhoods.py``)."""
 
     def __init__(self, instance: Instance, tasks: Sequence[int] | None = None,
                  committed: Sequence[Route] | None = None, plan_time: float = 0.0,
-                 options: BranchPriceOptions | None = None) -> None:
+                 options: BranchPriceOptions | None = None,
+                 reach: Sequence[frozenset[int] | None] | None = None) -> None:
         self.master = Master(instance, tasks, committed, plan_time,
-                             options if options is not None else BranchPriceOptions())
+                             options if options is not None else BranchPriceOptions(), reach)
         self.options = self.master.options
         self.pricing = ColumnGeneration(self.master)
         self.branching = Brancher(self.master)

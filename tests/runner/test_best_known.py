@@ -320,3 +320,32 @@ def test_the_manifest_lock_makes_a_second_writer_wait(tmp_path):
         order.append("first")
     waiting.join(10)
     assert order == ["first", "second"]
+
+
+def test_a_neighbourhood_search_lowers_a_best_known_plan(tmp_path):
+    # reg-static-3-6-s2 (J* 5.069236) from a random plan: repairs of two AAVs and one more
+    # task, then of all three, reach J* (tests/formulations/test_neighbourhoods.py checks
+    # the repairs against brute force); the plan is taken in, not proved.
+    from tsac_bench.formulations.network import canonical_routes
+    from tsac_bench.model.io import write_solution
+
+    from tests.formulations.plans import random_plan
+
+    directory = tmp_path / "set"
+    directory.mkdir()
+    regression = QUICK.parent / "regression"
+    shutil.copy(regression / "reg-static-3-6-s2.json", directory)
+    instance = read_instance(directory / "reg-static-3-6-s2.json")
+    start = tmp_path / "start.json"
+    write_solution(Solution(instance.name, canonical_routes(instance, random_plan(instance, 0))),
+                   instance, start)
+    assert "plan none -> 156.963886" in _invoke("bks", "recombine", directory, start).output
+    result = _invoke("bks", "lns", directory, "--aavs", 2, "--extra", 1, "--time-limit", 600)
+    assert result.exit_code == 0, result.output
+    assert "reg-static-3-6-s2: plan 156.963886 -> 5.069236 (lns static)" in result.output
+    entry = read_manifest(directory).entries["reg-static-3-6-s2"]
+    assert entry["found_by"]["method"] == "lns" and entry["status"] == "feasible"
+    assert entry["found_by"]["settings"] == {"aavs": 2, "extra": 1, "repair_limit": 60.0}
+    assert all(check.passed for check in best_known.check(directory))
+    bad = _invoke("bks", "lns", directory, "--aavs", 0)
+    assert bad.exit_code == 2 and "--aavs" in bad.output

@@ -348,6 +348,38 @@ def improve(directory: Path, sources: Sequence[Path], time_limit: float,
     return changes
 
 
+def neighbourhood_search(directory: Path, time_limit: float,
+                         only: Sequence[str] | None = None, *, aavs: int = 3, extra: int = 4,
+                         repair_limit: float = 60.0, seed: int = 0,
+                         note: Callable[[str], None] = print) -> list[Change]:
+    """Search the best-known plan of each unproved instance of ``directory`` (``only``:
+    those) for ``time_limit`` seconds with exact-bp repairs of ``aavs`` related AAVs and the
+    tasks near them (``formulations/branch_price/neighbourhoods.py``); take its plan where
+    lower."""
+    from tsac_bench.formulations.branch_price.neighbourhoods import search
+
+    target = _Set(directory)
+    found_by = {"method": "lns", "settings": {"aavs": aavs, "extra": extra,
+                                              "repair_limit": repair_limit},
+                "mode": "static", "seed": seed, "budget": None, "time_limit": time_limit}
+    changes = []
+    for name in sorted(_wanted(target, only)):
+        entry = target.entry(name)
+        if entry.get("J_star") is not None or not entry.get("best_plan"):
+            continue
+        instance = read_instance(target.instances[name])
+        start = read_solution(directory / entry["best_plan"], instance)
+        note(f"{name}: neighbourhood search for {time_limit:g} s from J {entry['best_J']:.6f}")
+        plan, report = search(instance, start.routes, time_limit, aavs=aavs, extra=extra,
+                              repair_limit=repair_limit, seed=seed,
+                              note=lambda line: note(f"  {line}"))
+        with _held(directory) as now:
+            changes += _take(now, now.entry(name), instance, Solution(name, plan),
+                             {**found_by, "repairs": report.repairs}, None, {},
+                             f"searching {name}")
+    return changes
+
+
 def add_task_bounds(directory: Path) -> int:
     """Give every instance of ``directory`` at least the tasks-on-their-own bound (cheap:
     0.06 s at 32/80); returns how many bounds it raised."""

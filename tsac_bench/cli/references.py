@@ -133,6 +133,34 @@ def bks_improve(
 
 
 
+@bks_app.command("lns")
+@user_errors
+def bks_lns(
+    directory: Annotated[Path, typer.Argument(metavar="DIR")],
+    time_limit: Annotated[float, typer.Option(min=0.01, help="seconds per instance")]
+    = 600.0,
+    only: Annotated[list[str] | None, typer.Option(help="instance name(s) to search")]
+    = None,
+    aavs: Annotated[int, typer.Option(min=1, help="AAVs each repair re-plans")] = 3,
+    extra: Annotated[int, typer.Option(min=0, help="tasks beyond theirs each repair may "
+                                       "give them")] = 4,
+    repair_limit: Annotated[float, typer.Option(min=0.01, help="seconds of exact-bp per "
+                                                "repair (doubled after a round in vain)")]
+    = 60.0,
+    seed: Annotated[int, typer.Option(min=0, help="order of the neighbourhoods")] = 0,
+) -> None:
+    """Large neighbourhood search from each unproved instance's best-known plan: a few
+    related AAVs re-planned by exact-bp over the tasks near them, the others held to their
+    routes; keep the plan where lower."""
+    from tsac_bench.batch import best_known
+
+    changes = best_known.neighbourhood_search(directory, time_limit, only, aavs=aavs,
+                                              extra=extra, repair_limit=repair_limit,
+                                              seed=seed, note=say_error)
+    _print_changes(changes)
+
+
+
 @bks_app.command("bound")
 @user_errors
 def bks_bound(directory: Annotated[Path, typer.Argument(metavar="DIR")]) -> None:

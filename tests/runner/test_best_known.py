@@ -326,10 +326,9 @@ def test_a_neighbourhood_search_lowers_a_best_known_plan(tmp_path):
     # reg-static-3-6-s2 (J* 5.069236) from a random plan: repairs of two AAVs and one more
     # task, then of all three, reach J* (tests/formulations/test_neighbourhoods.py checks
     # the repairs against brute force); the plan is taken in, not proved.
+    from tests.formulations.plans import random_plan
     from tsac_bench.formulations.network import canonical_routes
     from tsac_bench.model.io import write_solution
-
-    from tests.formulations.plans import random_plan
 
     directory = tmp_path / "set"
     directory.mkdir()

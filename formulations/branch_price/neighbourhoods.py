@@ -12,7 +12,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from tsac_bench.formulations.branch_price.column_generation import reaches
-from tsac_bench.formulations.branch_price.options import BranchPriceOptions
 from tsac_bench.formulations.branch_price.search import BranchPrice
 from tsac_bench.formulations.network import canonical_routes
 from tsac_bench.model import Instance, Route
@@ -55,13 +54,13 @@ def neighbourhood(instance: Instance, plan: Plan, around: int, aavs: int, extra:
     return Neighbourhood(free, frozenset(own | set(nearest[:extra])))
 
 
-def repair(instance: Instance, plan: Plan, area: Neighbourhood, time_limit: float,
-           options: BranchPriceOptions | None = None) -> tuple[Plan, str]:
+def repair(instance: Instance, plan: Plan, area: Neighbourhood, time_limit: float
+           ) -> tuple[Plan, str]:
     """exact-bp on ``area`` (the other AAVs held to their routes of ``plan``, a canonical
     static plan) from ``plan`` for ``time_limit`` seconds: its plan and status."""
     held = tuple(() if n in area.free else route for n, route in enumerate(plan))
     reach = [area.tasks if n in area.free else frozenset() for n in range(instance.n_aavs)]
-    search = BranchPrice(instance, None, held, 0.0, options, reach)
+    search = BranchPrice(instance, None, held, 0.0, None, reach)
     result = search.solve([plan], time_limit)
     return result.routes, result.status
 

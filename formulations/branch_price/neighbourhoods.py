@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from tsac_bench.formulations.branch_price.column_generation import reaches
+from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
 from tsac_bench.formulations.branch_price.search import BranchPrice
 from tsac_bench.formulations.network import canonical_routes
 from tsac_bench.model import Instance, Route
@@ -76,34 +77,37 @@ class SearchReport:
     largest: int = 0
 
 
-def search(instance: Instance, plan: Plan, time_limit: float, *, aavs: int = 3,
-           extra: int = 4, repair_limit: float = 60.0, seed: int = 0,
+def search(instance: Instance, plan: Plan, time_limit: float,
+           settings: NeighbourhoodSettings | None = None, *, seed: int = 0,
            note: Callable[[str], None] | None = None) -> tuple[Plan, SearchReport]:
     """The plan of least J that repairs of ``plan`` (a static plan) reach in ``time_limit``
-    seconds: neighbourhoods around each AAV in turn (a shuffled order, ``seed``), each
-    repaired for at most ``repair_limit`` seconds and kept where it lowers J. A
-    neighbourhood proved optimal is not tried again until the plan changes; once every one
-    of ``aavs`` AAVs is, those of one AAV more are tried, and the search stops early when
-    the neighbourhoods of the whole fleet are proved."""
+    seconds: neighbourhoods of ``settings.aavs`` AAVs around each AAV in turn (a shuffled
+    order, ``seed``), each repaired for at most ``settings.repair_limit`` seconds and kept
+    where it lowers J. A neighbourhood proved optimal is not tried again until the plan
+    changes; once every one of its size is, those of one AAV more are tried, and the search
+    stops early when the neighbourhoods of the whole fleet are proved (``settings``: None,
+    the defaults)."""
     began = time.perf_counter()
+    settings = settings or NeighbourhoodSettings()
     evaluator = CostEvaluator(instance)
     plan = canonical_routes(instance, plan)
     J = evaluator.cost(plan)
-    report = SearchReport(largest=aavs)
+    report = SearchReport(largest=settings.aavs)
     rng = random.Random(seed)
     settled: set[Neighbourhood] = set()
-    size, limit = aavs, repair_limit
+    size, limit = settings.aavs, settings.repair_limit
     while True:
         order = list(range(instance.n_aavs))
         rng.shuffle(order)
-        areas = [area for area in dict.fromkeys(neighbourhood(instance, plan, n, size, extra)
-                                                for n in order) if area not in settled]
+        areas = [area for area in dict.fromkeys(
+            neighbourhood(instance, plan, n, size, settings.extra) for n in order)
+            if area not in settled]
         if not areas:
             if size >= instance.n_aavs:
                 return plan, report
             # Every neighbourhood of this size is proved: larger ones (a variable
             # neighbourhood search) use the time left.
-            size, limit = size + 1, repair_limit
+            size, limit = size + 1, settings.repair_limit
             report.largest = max(report.largest, size)
             continue
         for area in areas:
@@ -120,7 +124,7 @@ def search(instance: Instance, plan: Plan, time_limit: float, *, aavs: int = 3,
                     note(f"J {J:.6f} -> {cost:.6f} (AAVs {sorted(area.free)})")
                 plan, J = candidate, cost
                 settled.clear()
-                size, limit = aavs, repair_limit
+                size, limit = settings.aavs, settings.repair_limit
                 break
             if status == "optimal":
                 report.proved += 1

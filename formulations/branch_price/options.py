@@ -97,3 +97,17 @@ class BranchPriceOptions:
 
 BranchPriceOptions.setting_constraints = declare(
     **{f.name: f.metadata["allowed"] for f in dataclasses.fields(BranchPriceOptions)})
+
+
+@dataclass(frozen=True)
+class NeighbourhoodSettings:
+    """The knobs of the neighbourhood search over a plan (``neighbourhoods.search``,
+    ``tsac-bench bks lns``); the defaults were chosen on validation instances apart from
+    paper-mc (reports/lns-settings.md)."""
+
+    #: AAVs each repair frees at first (one more once every such neighbourhood is proved).
+    aavs: int = 3
+    #: Tasks beyond the freed AAVs' own, nearest to those, that a repair may give them.
+    extra: int = 4
+    #: Seconds of exact-bp per repair, doubled after a round of repairs in vain.
+    repair_limit: float = 60.0

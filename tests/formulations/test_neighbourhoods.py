@@ -17,6 +17,7 @@ from tsac_bench.formulations.branch_price.neighbourhoods import (
     repair,
     search,
 )
+from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
 from tsac_bench.formulations.network import canonical_routes
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.io import read_instance, read_solution
@@ -84,7 +85,7 @@ def test_a_search_from_a_random_plan_ends_at_the_optimum(aavs: int, extra: int) 
     instance, J_star, _ = proved("reg-static-3-6-s2")
     start = random_plan(instance, 0)
     cost = CostEvaluator(instance).cost
-    plan, report = search(instance, start, 600, aavs=aavs, extra=extra, repair_limit=60)
+    plan, report = search(instance, start, 600, NeighbourhoodSettings(aavs, extra, 60))
     assert cost(start) > 150
     assert cost(plan) == pytest.approx(J_star, rel=1e-9)
     assert report.largest == 3 and report.proved >= 1 and report.improved >= 1

@@ -13,7 +13,7 @@ from tsac_bench.formulations.task_bound import task_lower_bound
 from tsac_bench.model import Solution
 from tsac_bench.model.evaluator import evaluate
 from tsac_bench.model.io import read_instance, read_solution
-from tsac_bench.planning import PlanningState
+from tsac_bench.planning import PlanningState, make_allocator
 
 from .conftest import QUICK
 
@@ -71,7 +71,7 @@ def test_a_run_brings_its_best_offline_plan_and_bounds_into_the_manifest(small_s
     instance = read_instance(small_set / "quick-4-10-s5.json")
     costs = {}
     for path in (run / "solutions").rglob("quick-4-10-s5/*.json"):
-        plan = best_known.offline_plan(read_solution(path, instance))
+        plan = best_known.offline_plan(read_solution(path, instance), instance)
         costs[path.name] = evaluate(instance, plan).J
     entry = entries["quick-4-10-s5"]
     assert len(costs) == 4 and entry["best_J"] == pytest.approx(min(costs.values()), rel=1e-12)
@@ -105,6 +105,19 @@ def test_a_bound_above_the_best_J_and_a_plan_below_J_star_are_refused():
     assert best_known.take_bound(entry, 10.0, {"method": "exact", "time_limit": 60}, "x")
     assert entry["status"] == "optimal" and entry["J_star"] == 10.0
     assert not best_known.take_bound(entry, 9.0, {"method": "exact-bp"}, "x")
+
+
+def test_a_plan_is_kept_in_canonical_form(tmp_path):
+    # hocf's plan of quick-3-6-s3 (seed 0) has J 20.506584; the same plan with its late
+    # visits dropped and goods above a demand cut has 18.573178, and that is what is kept.
+    instance = read_instance(QUICK / "quick-3-6-s3.json")
+    plan = Solution(instance.name, make_allocator("hocf").plan(
+        PlanningState.static(instance), seed=0).routes)
+    assert pytest.approx(20.506584, abs=1e-6) == evaluate(instance, plan).J
+    entry = {"J_star": None, "lower_bound": None, "status": "feasible"}
+    assert best_known.take_plan(entry, tmp_path, instance, plan, {"method": "hocf"}, "x")
+    stored = read_solution(tmp_path / entry["best_plan"], instance)
+    assert entry["best_J"] == evaluate(instance, stored).J == pytest.approx(18.573178, abs=1e-6)
 
 
 def test_task_bounds_fill_an_empty_set(small_set):
@@ -339,7 +352,8 @@ def test_a_neighbourhood_search_lowers_a_best_known_plan(tmp_path):
     write_solution(Solution(instance.name, canonical_routes(instance, random_plan(instance, 0))),
                    instance, start)
     assert "plan none -> 156.963886" in _invoke("bks", "recombine", directory, start).output
-    result = _invoke("bks", "lns", directory, "--aavs", 2, "--extra", 1, "--time-limit", 600)
+    result = _invoke("bks", "lns", directory, "--aavs", 2, "--extra", 1, "--repair-limit", 60,
+                     "--time-limit", 600)
     assert result.exit_code == 0, result.output
     assert "reg-static-3-6-s2: plan 156.963886 -> 5.069236 (lns static)" in result.output
     entry = read_manifest(directory).entries["reg-static-3-6-s2"]

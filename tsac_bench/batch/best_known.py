@@ -8,7 +8,8 @@ instance's optimum), each entry gaining
 - ``best_J``: the lowest J of any plan the project found, as an offline plan (a dynamic
   run's stamps removed: docs/model.md, "The dynamic run", such a plan is feasible offline and
   its J no higher);
-- ``best_plan``: that plan, a solution file relative to the set's directory
+- ``best_plan``: that plan in canonical form (late visits dropped, amounts above a demand
+  cut; J no higher), a solution file relative to the set's directory
   (``best-known/NAME.json``);
 - ``found_by``: the method, settings, mode, seed and budget of the job that found it;
 - ``bound_by``: what proved ``lower_bound`` (an exact method and its time limit, or
@@ -20,6 +21,7 @@ run's better plans and bounds in; ``check`` re-evaluates every stored plan.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
@@ -36,6 +38,8 @@ from tsac_bench.batch.manifests import (
 )
 from tsac_bench.batch.store import OK, ResultStore
 from tsac_bench.errors import InputError
+from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
+from tsac_bench.formulations.network import canonical_routes
 from tsac_bench.model import Instance, Solution
 from tsac_bench.model.evaluator import cost_at_least, costs_agree, evaluate
 from tsac_bench.model.io import (
@@ -52,9 +56,12 @@ TASK_BOUND = "tasks-on-their-own"
 IMPROVED = "improved_from"
 
 
-def offline_plan(solution: Solution) -> Solution:
-    """``solution`` with the dynamic run's stamps removed: an offline plan of no higher J."""
-    return Solution(solution.instance, offline_routes(solution.routes))
+def offline_plan(solution: Solution, instance: Instance) -> Solution:
+    """``solution`` with the dynamic run's stamps removed, in canonical form (late visits
+    dropped, amounts above a demand cut: docs/formulations.md, "canonical solutions"): an
+    offline plan of no higher J."""
+    return Solution(solution.instance,
+                    canonical_routes(instance, offline_routes(solution.routes)))
 
 
 @dataclass(frozen=True)
@@ -117,11 +124,11 @@ def _describe(found_by: dict[str, Any]) -> str:
 
 def take_plan(entry: dict[str, Any], directory: Path, instance: Instance, solution: Solution,
               found_by: dict[str, Any], where: str) -> bool:
-    """Store ``solution`` (offline) as the entry's best plan if its J is lower than the best
-    known, or equal to it where no plan is stored yet (a manifest proved before plans were
-    kept); returns whether it did. A plan below a proved J* refutes the proof: refused,
-    loudly."""
-    plan = offline_plan(solution)
+    """Store ``solution`` (offline, canonical) as the entry's best plan if its J is lower
+    than the best known, or equal to it where no plan is stored yet (a manifest proved
+    before plans were kept); returns whether it did. A plan below a proved J* refutes the
+    proof: refused, loudly."""
+    plan = offline_plan(solution, instance)
     cost = evaluate(instance, plan).J
     best, J_star = entry.get("best_J"), entry.get("J_star")
     if J_star is not None and not cost_at_least(cost, J_star):
@@ -281,7 +288,7 @@ def _known_plans(target: _Set, name: str, instance: Instance, paths: Sequence[Pa
                  ) -> list[Solution]:
     """The offline plans of ``paths`` and the instance's best-known plan."""
     entry = target.entry(name)
-    solutions = [offline_plan(read_solution(path, instance)) for path in paths]
+    solutions = [offline_plan(read_solution(path, instance), instance) for path in paths]
     if entry.get("best_plan"):
         solutions.append(read_solution(target.directory / entry["best_plan"], instance))
     return solutions
@@ -349,18 +356,18 @@ def improve(directory: Path, sources: Sequence[Path], time_limit: float,
 
 
 def neighbourhood_search(directory: Path, time_limit: float,
-                         only: Sequence[str] | None = None, *, aavs: int = 3, extra: int = 4,
-                         repair_limit: float = 60.0, seed: int = 0,
-                         note: Callable[[str], None] = print) -> list[Change]:
+                         only: Sequence[str] | None = None,
+                         settings: NeighbourhoodSettings | None = None, *,
+                         seed: int = 0, note: Callable[[str], None] = print) -> list[Change]:
     """Search the best-known plan of each unproved instance of ``directory`` (``only``:
-    those) for ``time_limit`` seconds with exact-bp repairs of ``aavs`` related AAVs and the
-    tasks near them (``formulations/branch_price/neighbourhoods.py``); take its plan where
-    lower."""
+    those) for ``time_limit`` seconds with exact-bp repairs of a few related AAVs and the
+    tasks near them (``formulations/branch_price/neighbourhoods.py``; ``settings``: None,
+    the defaults); take its plan where lower."""
     from tsac_bench.formulations.branch_price.neighbourhoods import search
 
+    settings = settings or NeighbourhoodSettings()
     target = _Set(directory)
-    found_by = {"method": "lns", "settings": {"aavs": aavs, "extra": extra,
-                                              "repair_limit": repair_limit},
+    found_by = {"method": "lns", "settings": dataclasses.asdict(settings),
                 "mode": "static", "seed": seed, "budget": None, "time_limit": time_limit}
     changes = []
     for name in sorted(_wanted(target, only)):
@@ -370,8 +377,7 @@ def neighbourhood_search(directory: Path, time_limit: float,
         instance = read_instance(target.instances[name])
         start = read_solution(directory / entry["best_plan"], instance)
         note(f"{name}: neighbourhood search for {time_limit:g} s from J {entry['best_J']:.6f}")
-        plan, report = search(instance, start.routes, time_limit, aavs=aavs, extra=extra,
-                              repair_limit=repair_limit, seed=seed,
+        plan, report = search(instance, start.routes, time_limit, settings, seed=seed,
                               note=lambda line: note(f"  {line}"))
         with _held(directory) as now:
             changes += _take(now, now.entry(name), instance, Solution(name, plan),

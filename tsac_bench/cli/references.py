@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from tsac_bench.cli.app import app, console, say_error, user_errors
+from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
 
 if TYPE_CHECKING:
     from tsac_bench.batch.best_known import Change
@@ -141,12 +142,13 @@ def bks_lns(
     = 600.0,
     only: Annotated[list[str] | None, typer.Option(help="instance name(s) to search")]
     = None,
-    aavs: Annotated[int, typer.Option(min=1, help="AAVs each repair re-plans")] = 3,
+    aavs: Annotated[int, typer.Option(min=1, help="AAVs each repair re-plans")]
+    = NeighbourhoodSettings.aavs,
     extra: Annotated[int, typer.Option(min=0, help="tasks beyond theirs each repair may "
-                                       "give them")] = 4,
+                                       "give them")] = NeighbourhoodSettings.extra,
     repair_limit: Annotated[float, typer.Option(min=0.01, help="seconds of exact-bp per "
                                                 "repair (doubled after a round in vain)")]
-    = 60.0,
+    = NeighbourhoodSettings.repair_limit,
     seed: Annotated[int, typer.Option(min=0, help="order of the neighbourhoods")] = 0,
 ) -> None:
     """Large neighbourhood search from each unproved instance's best-known plan: a few
@@ -154,8 +156,8 @@ def bks_lns(
     routes; keep the plan where lower."""
     from tsac_bench.batch import best_known
 
-    changes = best_known.neighbourhood_search(directory, time_limit, only, aavs=aavs,
-                                              extra=extra, repair_limit=repair_limit,
+    settings = NeighbourhoodSettings(aavs, extra, repair_limit)
+    changes = best_known.neighbourhood_search(directory, time_limit, only, settings,
                                               seed=seed, note=say_error)
     _print_changes(changes)
 

@@ -1,0 +1,124 @@
+"""The neighbourhood search's settings (``tsac-bench bks lns``: AAVs a repair frees, tasks
+beyond theirs, seconds per repair) on validation instances (generator seeds from 900000,
+apart from paper-mc), every setting from the same start: DGA's plan after exact-bp's
+incumbent generations, seed 0.
+
+    python benchmarks/lns_settings.py --sizes 8/20:4 16/40:2 \
+        --settings 2/6/30 3/4/60 2/4/30 3/6/30 --time-limit 120 --workers 2
+
+Per instance and setting (AAVS/EXTRA/REPAIR_LIMIT): the start's J, the J the search
+reached in the time limit, the change, repairs run, lowered and proved, and the most AAVs a
+neighbourhood freed; then per size and setting the mean change and the instances where the
+setting reached the least J. Each worker a core of its own: the seconds bound the search.
+Writes the tables to stdout and to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shlex
+import sys
+from collections import defaultdict
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
+from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.generator import generate
+from tsac_bench.reporting.report import shown_command
+
+ROOT = Path(__file__).resolve().parent.parent
+VALIDATION_SEED = 900000
+HEADER = ["| instance | setting | start J | J | change | repairs | lowered | proved "
+          "| largest |", "|---|---|---|---|---|---|---|---|---|"]
+
+
+def _settings(text: str) -> NeighbourhoodSettings:
+    aavs, extra, repair_limit = text.split("/")
+    return NeighbourhoodSettings(int(aavs), int(extra), float(repair_limit))
+
+
+def _label(settings: NeighbourhoodSettings) -> str:
+    return f"{settings.aavs}/{settings.extra}/{settings.repair_limit:g}"
+
+
+def _start(size: str, seed: int) -> tuple:
+    from tsac_bench.planning import PlanningState, make_allocator
+    from tsac_bench.solvers.exact import INCUMBENT_GENERATIONS
+
+    dga = make_allocator("dga", generations=INCUMBENT_GENERATIONS)
+    return dga.plan(PlanningState.static(generate(size, seed)), seed=0).routes
+
+
+def _search(size: str, seed: int, start: tuple, settings: NeighbourhoodSettings,
+            time_limit: float) -> dict:
+    from tsac_bench.formulations.branch_price.neighbourhoods import search
+
+    instance = generate(size, seed)
+    cost = CostEvaluator(instance).cost
+    plan, report = search(instance, start, time_limit, settings)
+    return {"size": size, "seed": seed, "setting": _label(settings), "start": cost(start),
+            "J": cost(plan), "repairs": report.repairs, "lowered": report.improved,
+            "proved": report.proved, "largest": report.largest}
+
+
+def _summary(results: list[dict]) -> list[str]:
+    """Per size and setting: the mean change and on how many instances it reached the least
+    J (ties counted for each)."""
+    by_instance = defaultdict(list)
+    for row in results:
+        by_instance[row["size"], row["seed"]].append(row)
+    changes, wins = defaultdict(list), defaultdict(int)
+    for (size, _), rows in by_instance.items():
+        least = min(row["J"] for row in rows)
+        for row in rows:
+            changes[size, row["setting"]].append(row["J"] / row["start"] - 1)
+            wins[size, row["setting"]] += row["J"] <= least * (1 + 1e-9)
+    lines = ["| size | setting | mean change | least J on |", "|---|---|---|---|"]
+    for (size, setting), values in changes.items():
+        lines.append(f"| {size} | {setting} | {100 * sum(values) / len(values):+.2f} % "
+                     f"| {wins[size, setting]} of {len(values)} |")
+    return lines
+
+
+def main(argv: list[str]) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", nargs="+", default=["8/20:4", "16/40:2"],
+                        help="SIZE:COUNT, the instances of each size")
+    parser.add_argument("--settings", nargs="+", type=_settings,
+                        default=[NeighbourhoodSettings()], help="AAVS/EXTRA/REPAIR_LIMIT")
+    parser.add_argument("--time-limit", type=float, default=120.0)
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--out", type=Path, default=ROOT / "reports" / "lns-settings.md")
+    args = parser.parse_args(argv)
+    instances = [(size, seed) for size, count in (spec.split(":") for spec in args.sizes)
+                 for seed in range(VALIDATION_SEED, VALIDATION_SEED + int(count))]
+    with ProcessPoolExecutor(args.workers) as pool:
+        sizes, seeds = [size for size, _ in instances], [seed for _, seed in instances]
+        starts = dict(zip(instances, pool.map(_start, sizes, seeds), strict=True))
+        jobs = [pool.submit(_search, size, seed, starts[size, seed], settings,
+                            args.time_limit)
+                for size, seed in instances for settings in args.settings]
+        results = []
+        for job in jobs:
+            row = job.result()
+            results.append(row)
+            print(row, flush=True)
+    rows = [f"| {r['size']} seed {r['seed']} | {r['setting']} | {r['start']:.6f} "
+            f"| {r['J']:.6f} | {100 * (r['J'] / r['start'] - 1):+.2f} % | {r['repairs']} "
+            f"| {r['lowered']} | {r['proved']} | {r['largest']} |" for r in results]
+    command = shown_command(shlex.join(["python", "benchmarks/lns_settings.py", *argv]), ROOT)
+    args.out.write_text("\n".join([
+        "# The neighbourhood search's settings (validation instances)", "",
+        f"Command: `{command}`  ",
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores ({platform.python_version()}), "
+        f"{args.workers} worker(s), each search {args.time_limit:g} s from DGA's plan "
+        "(exact-bp's incumbent generations, seed 0). A setting is AAVS/EXTRA/REPAIR_LIMIT "
+        "(`tsac-bench bks lns --aavs --extra --repair-limit`).", "",
+        *_summary(results), "", *HEADER, *rows, ""]))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -10,7 +10,7 @@ from tsac_bench.batch.manifests import iter_instance_files, read_manifest
 from tsac_bench.batch.runner import RunConfig, run_batch
 from tsac_bench.errors import InputError
 from tsac_bench.formulations.task_bound import task_lower_bound
-from tsac_bench.model import Solution
+from tsac_bench.model import Solution, Visit
 from tsac_bench.model.evaluator import evaluate
 from tsac_bench.model.io import read_instance, read_solution
 from tsac_bench.planning import PlanningState, make_allocator
@@ -118,6 +118,9 @@ def test_a_plan_is_kept_in_canonical_form(tmp_path):
     assert best_known.take_plan(entry, tmp_path, instance, plan, {"method": "hocf"}, "x")
     stored = read_solution(tmp_path / entry["best_plan"], instance)
     assert entry["best_J"] == evaluate(instance, stored).J == pytest.approx(18.573178, abs=1e-6)
+    # A plan over a task's demand and the AAV's capacity is not cut into a feasible one.
+    overloaded = Solution(instance.name, ((Visit(0, 1e6),),) + ((),) * (instance.n_aavs - 1))
+    assert best_known.offline_plan(overloaded, instance) == overloaded
 
 
 def test_task_bounds_fill_an_empty_set(small_set):

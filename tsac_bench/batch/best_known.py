@@ -59,9 +59,12 @@ IMPROVED = "improved_from"
 def offline_plan(solution: Solution, instance: Instance) -> Solution:
     """``solution`` with the dynamic run's stamps removed, in canonical form (late visits
     dropped, amounts above a demand cut: docs/formulations.md, "canonical solutions"): an
-    offline plan of no higher J."""
-    return Solution(solution.instance,
-                    canonical_routes(instance, offline_routes(solution.routes)))
+    offline plan of no higher J. An infeasible plan is left as it is, for the checks to
+    refuse: cutting its amounts could make it feasible, a plan no run found."""
+    routes = offline_routes(solution.routes)
+    if evaluate(instance, routes).feasible:
+        routes = canonical_routes(instance, routes)
+    return Solution(solution.instance, routes)
 
 
 @dataclass(frozen=True)

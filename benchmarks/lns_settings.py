@@ -25,7 +25,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
-from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.model.evaluator import CostEvaluator, costs_agree
 from tsac_bench.model.generator import generate
 from tsac_bench.reporting.report import shown_command
 
@@ -75,7 +75,7 @@ def _summary(results: list[dict]) -> list[str]:
         least = min(row["J"] for row in rows)
         for row in rows:
             changes[size, row["setting"]].append(row["J"] / row["start"] - 1)
-            wins[size, row["setting"]] += row["J"] <= least * (1 + 1e-9)
+            wins[size, row["setting"]] += costs_agree(row["J"], least)
     lines = ["| size | setting | mean change | least J on |", "|---|---|---|---|"]
     for (size, setting), values in changes.items():
         lines.append(f"| {size} | {setting} | {100 * sum(values) / len(values):+.2f} % "

@@ -23,6 +23,8 @@ their own bound, so a run stopped before its solver has a bound still has one.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from tsac_bench.planning import PlanningState
@@ -34,6 +36,12 @@ ARRIVAL_SLACK = 1e-9
 
 def task_lower_bound(state: PlanningState) -> float:
     """The sum over the instance's tasks of each task's least cost on its own (above)."""
+    return math.fsum(task_lower_bounds(state))
+
+
+def task_lower_bounds(state: PlanningState) -> list[float]:
+    """Each task's least cost on its own (above), by task index: ``w1 + w2`` where no plan
+    of the state may visit it, 0 where a committed prefix does."""
     instance = state.instance
     n_tasks = instance.n_tasks
     w1, w2, w3 = instance.weights
@@ -41,7 +49,7 @@ def task_lower_bound(state: PlanningState) -> float:
     depots = list(instance.depot_nodes)
     touched = {v.node for prefix in state.committed for v in prefix if v.node < n_tasks}
     anchors = [state.anchor(n) for n in range(instance.n_aavs)]
-    total = instance.unserved_task_cost * (n_tasks - len(state.visible | touched))
+    least = [0.0 if m in touched else instance.unserved_task_cost for m in range(n_tasks)]
     for m in sorted(state.visible - touched):
         task = instance.tasks[m]
         # The shortest leg into m from any node but m itself (AAV starts join per AAV).
@@ -61,8 +69,8 @@ def task_lower_bound(state: PlanningState) -> float:
             members.append(((arrival - task.t_start) / instance.horizon,
                             w3 * aav.alpha / 1000.0 / instance.e_base * leg,
                             min(aav.capacity, task.demand)))
-        total += _least_task_cost(members, task.demand, w1, w2, instance.unserved_task_cost)
-    return total
+        least[m] = _least_task_cost(members, task.demand, w1, w2, instance.unserved_task_cost)
+    return least
 
 
 def _least_task_cost(members: list[tuple[float, float, int]], demand: int, w1: float,

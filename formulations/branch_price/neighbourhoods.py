@@ -15,8 +15,10 @@ from tsac_bench.formulations.branch_price.column_generation import reaches
 from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
 from tsac_bench.formulations.branch_price.search import BranchPrice
 from tsac_bench.formulations.network import canonical_routes
+from tsac_bench.formulations.task_bound import task_lower_bounds
 from tsac_bench.model import Instance, Route
 from tsac_bench.model.evaluator import CostEvaluator
+from tsac_bench.planning import PlanningState
 
 Plan = tuple[Route, ...]
 
@@ -66,6 +68,23 @@ def repair(instance: Instance, plan: Plan, area: Neighbourhood, time_limit: floa
     return result.routes, result.status
 
 
+def centre_order(evaluator: CostEvaluator, plan: Plan, rng: random.Random,
+                 least: list[float] | None = None) -> list[int]:
+    """The AAVs that neighbourhoods are built around, in the order tried: shuffled by
+    ``rng``; with ``least`` (each task's tasks-on-their-own bound), sorted by the most any
+    task an AAV visits costs in ``plan`` above its bound, ties in the shuffled order (what
+    a repair around it could at best take off one task; 0 for an AAV that visits none)."""
+    instance = evaluator.instance
+    order = list(range(instance.n_aavs))
+    rng.shuffle(order)
+    if least is None:
+        return order
+    excess = [t.cost.total - least[m] for m, t in enumerate(evaluator.evaluate(plan).per_task)]
+    dearest = [max((excess[m] for m in _visited(instance, route)), default=0.0)
+               for route in plan]
+    return sorted(order, key=lambda n: -dearest[n])
+
+
 @dataclass
 class SearchReport:
     """What one ``search`` did: repairs run, those that lowered J, those proved optimal,
@@ -81,12 +100,12 @@ def search(instance: Instance, plan: Plan, time_limit: float,
            settings: NeighbourhoodSettings | None = None, *, seed: int = 0,
            note: Callable[[str], None] | None = None) -> tuple[Plan, SearchReport]:
     """The plan of least J that repairs of ``plan`` (a static plan) reach in ``time_limit``
-    seconds: neighbourhoods of ``settings.aavs`` AAVs around each AAV in turn (a shuffled
-    order, ``seed``), each repaired for at most ``settings.repair_limit`` seconds and kept
-    where it lowers J. A neighbourhood proved optimal is not tried again until the plan
-    changes; once every one of its size is, those of one AAV more are tried, and the search
-    stops early when the neighbourhoods of the whole fleet are proved (``settings``: None,
-    the defaults)."""
+    seconds: neighbourhoods of ``settings.aavs`` AAVs around each AAV in turn (in
+    ``settings.order``, shuffled by ``seed``), each repaired for at most
+    ``settings.repair_limit`` seconds and kept where it lowers J. A neighbourhood proved
+    optimal is not tried again until the plan changes; once every one of its size is, those
+    of one AAV more are tried, and the search stops early when the neighbourhoods of the
+    whole fleet are proved (``settings``: None, the defaults)."""
     began = time.perf_counter()
     settings = settings or NeighbourhoodSettings()
     evaluator = CostEvaluator(instance)
@@ -96,11 +115,12 @@ def search(instance: Instance, plan: Plan, time_limit: float,
     rng = random.Random(seed)
     settled: set[Neighbourhood] = set()
     size, limit = settings.aavs, settings.repair_limit
+    least = (task_lower_bounds(PlanningState.static(instance))
+             if settings.order == "excess" else None)
     while True:
-        order = list(range(instance.n_aavs))
-        rng.shuffle(order)
         areas = [area for area in dict.fromkeys(
-            neighbourhood(instance, plan, n, size, settings.extra) for n in order)
+            neighbourhood(instance, plan, n, size, settings.extra)
+            for n in centre_order(evaluator, plan, rng, least))
             if area not in settled]
         if not areas:
             if size >= instance.n_aavs:

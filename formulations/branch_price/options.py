@@ -17,6 +17,7 @@ NG_SIZE = 8  # tasks each ng neighbourhood remembers
 PRIMAL_FROM_TASKS = 30  # below it the primal simplex's other duals changed the tree
 SMOOTHING_FROM_TASKS = 30  # where the degenerate master's duals jump between extremes
 SMOOTHING = 0.7  # weight of the last smoothed point (Wentges)
+NEIGHBOURHOOD_ORDERS = ("shuffled", "excess")  # NeighbourhoodSettings.order
 
 
 def _knob(default: Any, allowed: Constraint) -> Any:
@@ -111,3 +112,12 @@ class NeighbourhoodSettings:
     extra: int = 4
     #: Seconds of exact-bp per repair, doubled after a round of repairs in vain.
     repair_limit: float = 60.0
+    #: The order of the AAVs the neighbourhoods are built around: "shuffled", or "excess"
+    #: (by the most any task an AAV visits costs above its tasks-on-their-own bound, ties
+    #: shuffled), which lowered the start less at 32/80 (reports/lns-order.md).
+    order: str = "shuffled"
+
+    def __post_init__(self) -> None:
+        if self.order not in NEIGHBOURHOOD_ORDERS:
+            raise ValueError(f"order: {self.order!r} is not one of "
+                             f"{', '.join(NEIGHBOURHOOD_ORDERS)}")

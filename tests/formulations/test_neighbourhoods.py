@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import random
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,7 @@ from tiny import tiny_instance
 
 from tsac_bench.formulations.branch_price.neighbourhoods import (
     Neighbourhood,
+    centre_order,
     neighbourhood,
     repair,
     search,
@@ -77,15 +79,36 @@ def test_the_aavs_freed_with_one_are_those_that_share_its_tasks_then_the_nearest
     assert max(reach[m] for m in added) <= min(reach[m] for m in reach if m not in added)
 
 
-@pytest.mark.parametrize(("aavs", "extra"), [(3, 6), (2, 1)])
-def test_a_search_from_a_random_plan_ends_at_the_optimum(aavs: int, extra: int) -> None:
+@pytest.mark.parametrize("seed", range(3))
+def test_the_excess_order_starts_with_the_visitors_of_the_task_most_above_its_bound(
+        seed: int) -> None:
+    # Bounds made up so that every task costs exactly its bound but T2, 5 above it: its
+    # visitors lead; every other AAV's excess is 0, so they keep the shuffled order.
+    instance, _, optimum = proved("reg-static-4-10-s24")
+    evaluator = CostEvaluator(instance)
+    least = [task.cost.total for task in evaluator.evaluate(optimum).per_task]
+    least[2] -= 5.0
+    visitors = {n for n, route in enumerate(optimum) if any(v.node == 2 for v in route)}
+    shuffled = centre_order(evaluator, optimum, random.Random(seed))
+    assert sorted(shuffled) == list(range(instance.n_aavs))
+    order = centre_order(evaluator, optimum, random.Random(seed), least)
+    assert 0 < len(visitors) < instance.n_aavs
+    assert set(order[:len(visitors)]) == visitors
+    assert order[len(visitors):] == [n for n in shuffled if n not in visitors]
+
+
+@pytest.mark.parametrize(("aavs", "extra", "order"),
+                         [(3, 6, "shuffled"), (2, 1, "shuffled"), (2, 1, "excess")])
+def test_a_search_from_a_random_plan_ends_at_the_optimum(aavs: int, extra: int,
+                                                         order: str) -> None:
     # reg-static-3-6-s2 (J* 5.069236). Every AAV and task free: one repair is exact-bp
     # itself. Two AAVs and one more task: those neighbourhoods end proved at 6.344003
     # (measured), then the search grows them to the whole fleet and reaches J*.
     instance, J_star, _ = proved("reg-static-3-6-s2")
     start = random_plan(instance, 0)
     cost = CostEvaluator(instance).cost
-    plan, report = search(instance, start, 600, NeighbourhoodSettings(aavs, extra, 60))
+    plan, report = search(instance, start, 600,
+                          NeighbourhoodSettings(aavs, extra, 60, order))
     assert cost(start) > 150
     assert cost(plan) == pytest.approx(J_star, rel=1e-9)
     assert report.largest == 3 and report.proved >= 1 and report.improved >= 1

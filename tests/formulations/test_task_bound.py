@@ -5,13 +5,15 @@ and reported by the exact methods when it beats their own bound."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
 from brute_force import brute_force
+from plans import random_plan
 from tiny import tiny_instance
 
-from tsac_bench.formulations.task_bound import task_lower_bound
+from tsac_bench.formulations.task_bound import task_lower_bound, task_lower_bounds
 from tsac_bench.model import AAV, Depot, Instance, Task, TaskKind, Visit
 from tsac_bench.model.evaluator import CostEvaluator
 from tsac_bench.model.io import read_instance
@@ -53,8 +55,10 @@ def test_invisible_tasks_cost_110_and_committed_ones_0() -> None:
     instance = pair_instance(TaskKind.DELIVERY, 0.0)
     nothing_visible = PlanningState(instance, 10.0, frozenset(), ((), ()))
     assert task_lower_bound(nothing_visible) == 110.0
+    assert task_lower_bounds(nothing_visible) == [110.0]
     committed = PlanningState(instance, 10.0, frozenset({0}), ((Visit(1), Visit(0, 3)), ()))
     assert task_lower_bound(committed) == 0.0
+    assert task_lower_bounds(committed) == [0.0]
 
 
 def test_a_late_plan_time_makes_the_coalition_later() -> None:
@@ -70,6 +74,20 @@ def test_never_above_the_brute_force_optimum(seed: int) -> None:
     optimum, _ = brute_force(instance)
     bound = task_lower_bound(PlanningState.static(instance))
     assert 0.0 < bound <= optimum + 1e-9
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_each_task_costs_at_least_its_own_bound_in_any_plan(seed: int) -> None:
+    # Per task, not only in sum: the neighbourhood search's "excess" order reads a task's
+    # cost above its own bound as what a repair could at best take off it.
+    instance = tiny_instance(300 + seed, n_aavs=2, n_tasks=3, max_demand=5)
+    state = PlanningState.static(instance)
+    least = task_lower_bounds(state)
+    assert math.fsum(least) == task_lower_bound(state)
+    evaluator = CostEvaluator(instance)
+    for routes in (brute_force(instance)[1], random_plan(instance, seed)):
+        for m, task in enumerate(evaluator.evaluate(routes).per_task):
+            assert least[m] <= task.cost.total + 1e-12, (m, task.cost)
 
 
 def test_never_above_a_regression_optimum() -> None:

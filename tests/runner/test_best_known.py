@@ -361,7 +361,9 @@ def test_a_neighbourhood_search_lowers_a_best_known_plan(tmp_path):
     assert "reg-static-3-6-s2: plan 156.963886 -> 5.069236 (lns static)" in result.output
     entry = read_manifest(directory).entries["reg-static-3-6-s2"]
     assert entry["found_by"]["method"] == "lns" and entry["status"] == "feasible"
-    assert entry["found_by"]["settings"] == {"aavs": 2, "extra": 1, "repair_limit": 60.0}
+    assert entry["found_by"]["settings"] == {"aavs": 2, "extra": 1, "repair_limit": 60.0,
+                                             "order": "shuffled"}
     assert all(check.passed for check in best_known.check(directory))
-    bad = _invoke("bks", "lns", directory, "--aavs", 0)
-    assert bad.exit_code == 2 and "--aavs" in bad.output
+    for option, value in (("--aavs", 0), ("--order", "cheapest")):
+        bad = _invoke("bks", "lns", directory, option, value)
+        assert bad.exit_code == 2 and option in bad.output

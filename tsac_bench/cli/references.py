@@ -3,6 +3,7 @@ and bounds (``bks``)."""
 
 from __future__ import annotations
 
+import enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -10,7 +11,15 @@ import typer
 from rich.table import Table
 
 from tsac_bench.cli.app import app, console, say_error, user_errors
-from tsac_bench.formulations.branch_price.options import NeighbourhoodSettings
+from tsac_bench.formulations.branch_price.options import (
+    NEIGHBOURHOOD_ORDERS,
+    NeighbourhoodSettings,
+)
+
+#: The choices of ``bks lns --order``, as typer takes a choice.
+NeighbourhoodOrder = enum.Enum("NeighbourhoodOrder", {o: o for o in NEIGHBOURHOOD_ORDERS},
+                               type=str)
+DEFAULT_ORDER = NeighbourhoodOrder(NeighbourhoodSettings.order)
 
 if TYPE_CHECKING:
     from tsac_bench.batch.best_known import Change
@@ -149,6 +158,9 @@ def bks_lns(
     repair_limit: Annotated[float, typer.Option(min=0.01, help="seconds of exact-bp per "
                                                 "repair (doubled after a round in vain)")]
     = NeighbourhoodSettings.repair_limit,
+    order: Annotated[NeighbourhoodOrder, typer.Option(
+        help="order of the AAVs the neighbourhoods are built around")]
+    = DEFAULT_ORDER,
     seed: Annotated[int, typer.Option(min=0, help="order of the neighbourhoods")] = 0,
 ) -> None:
     """Large neighbourhood search from each unproved instance's best-known plan: a few
@@ -156,7 +168,7 @@ def bks_lns(
     routes; keep the plan where lower."""
     from tsac_bench.batch import best_known
 
-    settings = NeighbourhoodSettings(aavs, extra, repair_limit)
+    settings = NeighbourhoodSettings(aavs, extra, repair_limit, order.value)
     changes = best_known.neighbourhood_search(directory, time_limit, only, settings,
                                               seed=seed, note=say_error)
     _print_changes(changes)

@@ -97,6 +97,11 @@ def test_the_excess_order_starts_with_the_visitors_of_the_task_most_above_its_bo
     assert order[len(visitors):] == [n for n in shuffled if n not in visitors]
 
 
+def test_an_unknown_order_is_refused_by_name() -> None:
+    with pytest.raises(ValueError, match="order: 'cheapest' is not one of shuffled, excess"):
+        NeighbourhoodSettings(order="cheapest")
+
+
 @pytest.mark.parametrize(("aavs", "extra", "order"),
                          [(3, 6, "shuffled"), (2, 1, "shuffled"), (2, 1, "excess")])
 def test_a_search_from_a_random_plan_ends_at_the_optimum(aavs: int, extra: int,

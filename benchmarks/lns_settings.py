@@ -18,6 +18,7 @@ and to ``--out``.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import platform
 import shlex
@@ -115,9 +116,8 @@ def main(argv: list[str]) -> None:
                       for seed in range(VALIDATION_SEED, VALIDATION_SEED + int(count))]
     with ProcessPoolExecutor(args.workers) as pool:
         sizes, seeds = [size for size, _ in instances], [seed for _, seed in instances]
-        starts = dict(zip(instances, pool.map(_start, sizes, seeds,
-                                              [args.start_seconds] * len(instances)),
-                          strict=True))
+        dga_start = functools.partial(_start, seconds=args.start_seconds)
+        starts = dict(zip(instances, pool.map(dga_start, sizes, seeds), strict=True))
         jobs = [pool.submit(_search, size, seed, starts[size, seed], settings,
                             seconds[size])
                 for size, seed in instances for settings in args.settings]
